@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# run_tests.sh — set up the workspace and run the test suite (unit + integration, rostest-style pytest).
+#
+#   launch_scripts/run_tests.sh [pytest args...]     e.g.  -k unit   or   tests/test_mapio.py
+#
+# Integration tests start their own rosmaster on a free port (never 11311) and stop everything they start.
+set -euo pipefail
+WS="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+case "${1:-}" in -h|--help) sed -n '2,6p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;; esac
+"$WS/launch_scripts/setup.sh"
+set +u; source "$WS/devel/setup.bash"; set -u
+cd "$WS"
+exec /usr/bin/python3 -m pytest tests "$@"

@@ -1,0 +1,1 @@
+"""ROS-free simulator core: map loading, kinematics, ray casting, battery model, world stepping."""
