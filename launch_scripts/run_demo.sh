@@ -1,0 +1,43 @@
+#!/usr/bin/env bash
+# run_demo.sh — README command (1): the navigation demo in the thesis's lab corridor.
+#
+#   launch_scripts/run_demo.sh [--map corridor|datacenter] [--port P] [--rtf FACTOR] [--goals FILE]
+#
+# Sets up the workspace (launch_scripts/setup.sh), starts a master (default port 11311, or --port,
+# or ROS_MASTER_URI), brings up the simulated TurtleBot 2 with navigation, drives it through the
+# goal sequence printing progress, then stops everything it started.
+set -euo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+port=""; map="corridor"; rtf="1.0"; goals=""
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --port) port="${2:?}"; shift 2 ;;
+    --map) map="${2:?}"; shift 2 ;;
+    --rtf) rtf="${2:?}"; shift 2 ;;
+    --goals) goals="$(realpath -m "${2:?}")"; shift 2 ;;
+    -h|--help) sed -n '2,9p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) cnr_die "unknown argument '$1' (see --help)" ;;
+  esac
+done
+[ -n "$goals" ] || goals="$CNR_WS/config/goals_${map}.yaml"
+[ -f "$goals" ] || cnr_die "goal file not found: $goals"
+"$CNR_WS/launch_scripts/setup.sh"
+cnr_source_ws
+cnr_master_uri "" "$port"
+cnr_master_up && cnr_die "a master already runs at $ROS_MASTER_URI; stop it or choose --port"
+cnr_ensure_master
+cnr_spawn "$CNR_WS/launch_scripts/bringup.sh" --map "$map" --rtf "$rtf"
+cnr_log "waiting for move_base's action server"
+/usr/bin/python3 - <<'PY' || cnr_die "move_base did not come up (see ~/.ros/log/latest)"
+import rospy, actionlib
+from move_base_msgs.msg import MoveBaseAction
+rospy.init_node('run_demo_wait', anonymous=True, disable_signals=True)
+ok = actionlib.SimpleActionClient('move_base', MoveBaseAction).wait_for_server(rospy.Duration(120))
+raise SystemExit(0 if ok else 1)
+PY
+set +e
+rosrun cnr_navigation goal_sequencer --goals "$goals"
+rc=$?
+set -e
+[ $rc = 0 ] && cnr_log "demo finished: every goal reached" || cnr_log "demo finished: some goals failed (exit $rc)"
+exit $rc
