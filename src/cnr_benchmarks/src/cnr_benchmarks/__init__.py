@@ -1,0 +1,1 @@
+"""The thesis's RTT and start-up benchmarks."""

@@ -1,0 +1,1 @@
+"""ROS-free statistics and report writing for the benchmarks."""
