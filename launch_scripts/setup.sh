@@ -24,13 +24,13 @@ PKGS=(
   python3-rospy python3-rostest python3-roslaunch python3-rosnode python3-rostopic python3-rosservice
   python3-rosparam python3-rosmsg python3-rosgraph python3-rosbag
   python3-actionlib python3-tf2-ros python3-dynamic-reconfigure libdynamic-reconfigure-config-init-mutex-dev
-  python3-message-filters
+  python3-message-filters python3-map-msgs
   libstd-msgs-dev libgeometry-msgs-dev libsensor-msgs-dev libnav-msgs-dev libactionlib-msgs-dev
   libmove-base-msgs-dev libtf2-msgs-dev
   python3-std-msgs python3-geometry-msgs python3-sensor-msgs python3-nav-msgs python3-std-srvs
   python3-move-base-msgs python3-actionlib-msgs python3-tf2-msgs python3-rosgraph-msgs
   python3-numpy python3-scipy python3-skimage python3-yaml python3-psutil python3-pil
-  python3-matplotlib python3-pytest python3-serial python3-pyroute2 python3-sklearn iproute2 iperf3
+  python3-matplotlib python3-pytest python3-pytest-timeout python3-serial python3-pyroute2 python3-sklearn iproute2 iperf3
 )
 
 if [ "$install" = 1 ]; then

@@ -1,0 +1,423 @@
+"""move_base-compatible navigation node (ROS I/O around :mod:`cnr_navigation.core`).
+
+Interface as move_base (navigation@noetic-devel ``move_base.cpp``); see the package README for
+the full list of topics, services and parameters.
+"""
+from __future__ import annotations
+
+import dataclasses
+import threading
+import time
+from collections import deque
+from typing import Deque, Dict, List, Optional
+
+import actionlib
+import numpy as np
+import rospy
+import tf2_ros
+from dynamic_reconfigure.server import Server as ReconfigureServer
+from geometry_msgs.msg import PoseStamped, Twist
+from move_base_msgs.msg import (MoveBaseAction, MoveBaseActionGoal, MoveBaseFeedback, MoveBaseGoal,
+                                RecoveryStatus)
+from nav_msgs.msg import Odometry, Path
+from nav_msgs.srv import GetPlan, GetPlanResponse
+from std_srvs.srv import Empty, EmptyResponse
+
+import cnr_params
+from cnr_navigation.cfg import DWAPlannerConfig, MoveBaseConfig
+from cnr_navigation.core.dwa import DWAController
+from cnr_navigation.core.geometry import IDENTITY, Pose2D
+from cnr_navigation.core.move_base import MoveBaseCore, Velocity, goal_problem
+from cnr_navigation.core.params import (GLOBAL_PLANNERS, LOCAL_PLANNERS, NavigationParams, dwa_config,
+                                        move_base_config, read_navigation_params)
+from cnr_navigation.core.planner import GlobalPlanner, PlanningError, path_with_headings
+from cnr_navigation.core.recovery import ClearCostmapRecovery, Recovery, RotateRecovery
+from cnr_navigation.costmap_ros import CostmapROS
+from cnr_navigation.ros_io import RosParamReader, TfHelper, path_msg, pose_stamped, pose_to_2d
+
+
+class _RecoveryBackend:
+    """What the recovery behaviours see of the node."""
+
+    def __init__(self, node: 'MoveBaseNode') -> None:
+        self.node = node
+
+    def robot_pose(self) -> Optional[Pose2D]:
+        return self.node.local_costmap.robot_pose()
+
+    def clear_costmaps(self, affected_maps: str, reset_distance: float, layer_names: List[str],
+                       invert_area_to_clear: bool) -> None:
+        maps = {'global': [self.node.global_costmap], 'local': [self.node.local_costmap],
+                'both': [self.node.global_costmap, self.node.local_costmap]}[affected_maps]
+        for cm in maps:
+            robot = cm.robot_pose()
+            if robot is not None:
+                cm.clear(robot, reset_distance, invert_area_to_clear, layer_names)
+
+    def in_collision(self, pose: Pose2D) -> bool:
+        return self.node.local_costmap.in_collision(pose)
+
+
+class MoveBaseNode:
+    """The node: builds costmaps, planner, controller and the state machine, and serves the action."""
+
+    def __init__(self, params: NavigationParams) -> None:
+        self.params = params
+        self.global_frame = params.global_frame
+        self.server = actionlib.SimpleActionServer('move_base', MoveBaseAction, execute_cb=self._execute,
+                                                   auto_start=False)
+        self.tf_buffer = tf2_ros.Buffer()
+        self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
+        self.tf = TfHelper(self.tf_buffer)
+        self.velocity: Velocity = (0.0, 0.0)
+        self.controller_lock = threading.RLock()
+        self.control_times: Deque[float] = deque(maxlen=500)
+        self.plan_times: Deque[float] = deque(maxlen=100)
+
+        self.cmd_pub = rospy.Publisher('cmd_vel', Twist, queue_size=1)
+        self.current_goal_pub = rospy.Publisher('~current_goal', PoseStamped, queue_size=1)
+        self.action_goal_pub = rospy.Publisher('move_base/goal', MoveBaseActionGoal, queue_size=1)
+        self.recovery_status_pub = rospy.Publisher('move_base/recovery_status', RecoveryStatus, queue_size=1)
+        self.simple_goal_sub = rospy.Subscriber('move_base_simple/goal', PoseStamped, self._on_simple_goal,
+                                                queue_size=1)
+        self.odom_sub = rospy.Subscriber(params.odom_topic, Odometry, self._on_odom, queue_size=1)
+
+        # global costmap and planner (navfn's namespace)
+        self.global_costmap = CostmapROS(params.global_costmap, self.tf, self._costmaps_active)
+        self.planner = GlobalPlanner(params.planner)
+        self.plan_pub = rospy.Publisher('~NavfnROS/plan', Path, queue_size=1)
+        self.navfn_srv = rospy.Service('~NavfnROS/make_plan', GetPlan, self._navfn_make_plan)
+
+        # local costmap and controller (DWAPlannerROS's namespace)
+        self.local_costmap = CostmapROS(params.local_costmap, self.tf, self._costmaps_active)
+        self.dwa = DWAController(params.dwa, params.move_base.controller_frequency)
+        self.dwa_extra = dict(params.dwa_extra)
+        self.dwa_global_plan_pub = rospy.Publisher('~DWAPlannerROS/global_plan', Path, queue_size=1)
+        self.local_plan_pub = rospy.Publisher('~DWAPlannerROS/local_plan', Path, queue_size=1)
+        self._dwa_defaults: Optional[Dict] = None
+        self.dwa_server = ReconfigureServer(DWAPlannerConfig, self._on_dwa_cfg, '~DWAPlannerROS')
+
+        self.make_plan_srv = rospy.Service('~make_plan', GetPlan, self._make_plan_service)
+        self.clear_srv = rospy.Service('~clear_costmaps', Empty, self._clear_costmaps_service)
+
+        rb = _RecoveryBackend(self)
+        recoveries: List[Recovery] = []
+        for r in params.recoveries:
+            if r.clear is not None:
+                recoveries.append(ClearCostmapRecovery(r.name, r.clear, rb))
+            elif r.rotate is not None:
+                recoveries.append(RotateRecovery(r.name, r.rotate, rb))
+        self.core = MoveBaseCore(params.move_base, self, recoveries, sync_planner=False)
+
+        self._planner_thread = threading.Thread(target=self._planner_loop, name='planner', daemon=True)
+        self._planner_thread.start()
+        self.server.start()
+        self._mb_defaults: Optional[Dict] = None
+        self.mb_server = ReconfigureServer(MoveBaseConfig, self._on_move_base_cfg)
+
+    # ================================================================================================
+    # NavigationBackend for the state machine
+
+    def robot_pose(self) -> Optional[Pose2D]:
+        return self.global_costmap.robot_pose()
+
+    def check_goal(self, goal: Pose2D) -> None:
+        if self.global_costmap.has_map:
+            self.planner.check_goal(self.global_costmap.planning_grid(static_only=True), goal)
+
+    def make_plan(self, start: Pose2D, goal: Pose2D) -> np.ndarray:
+        if not self.global_costmap.has_map:
+            raise PlanningError('no_map', 'The global costmap has no map yet.')
+        t0 = time.perf_counter()
+        plan = self.planner.make_plan(self.global_costmap.planning_grid(), start, goal)
+        self.plan_times.append(time.perf_counter() - t0)
+        self.plan_pub.publish(path_msg(plan, self.global_frame, rospy.Time.now()))
+        return plan
+
+    def set_plan(self, plan: np.ndarray) -> bool:
+        with self.controller_lock:
+            ok = self.dwa.set_plan(plan)
+        self.dwa_global_plan_pub.publish(path_msg(plan, self.global_frame, rospy.Time.now()))
+        return ok
+
+    def _global_to_local(self) -> Optional[Pose2D]:
+        local_frame = self.local_costmap.costmap.cfg.global_frame
+        if local_frame == self.global_frame:
+            return IDENTITY
+        found = self.tf.lookup(local_frame, self.global_frame)
+        return found[0] if found else None
+
+    def compute_velocity(self) -> Optional[Velocity]:
+        pose = self.local_costmap.robot_pose()
+        g2l = self._global_to_local()
+        if pose is None or g2l is None:
+            return None
+        with self.controller_lock, self.local_costmap.lock:
+            result = self.dwa.compute_velocity(pose, self.velocity, self.local_costmap.costmap, g2l)
+        stamp = rospy.Time.now()
+        self.local_plan_pub.publish(path_msg(result.trajectory, self.local_costmap.costmap.cfg.global_frame, stamp))
+        if result.cmd is None:
+            rospy.logwarn_throttle(2.0, 'DWA planner failed to produce path.')
+        return result.cmd
+
+    def is_goal_reached(self) -> bool:
+        pose = self.local_costmap.robot_pose()
+        g2l = self._global_to_local()
+        if pose is None or g2l is None:
+            return False
+        with self.controller_lock:
+            return self.dwa.is_goal_reached(pose, self.velocity, g2l)
+
+    def sensors_current(self) -> bool:
+        return self.local_costmap.sensors_current()
+
+    # ================================================================================================
+    # callbacks
+
+    def _costmaps_active(self) -> bool:
+        return not self.core_cfg_shutdown_costmaps() or self.server.is_active()
+
+    def core_cfg_shutdown_costmaps(self) -> bool:
+        core = getattr(self, 'core', None)
+        return bool(core is not None and core.cfg.shutdown_costmaps)
+
+    def _on_odom(self, msg: Odometry) -> None:
+        self.velocity = (msg.twist.twist.linear.x, msg.twist.twist.angular.z)
+
+    def _on_simple_goal(self, msg: PoseStamped) -> None:
+        rospy.logdebug('In ROS goal callback, wrapping the PoseStamped in the action message and re-sending to '
+                       'the server.')
+        goal = MoveBaseActionGoal()
+        goal.header.stamp = rospy.Time.now()
+        goal.goal.target_pose = msg
+        self.action_goal_pub.publish(goal)
+
+    def publish_zero(self) -> None:
+        self.cmd_pub.publish(Twist())
+
+    def _publish_cmd(self, cmd: Velocity) -> None:
+        msg = Twist()
+        msg.linear.x, msg.angular.z = cmd
+        self.cmd_pub.publish(msg)
+
+    def _to_global(self, target: PoseStamped) -> Optional[PoseStamped]:
+        """``goalToGlobalFrame``: the pose in the global frame (latest transform), None if tf has none."""
+        frame = target.header.frame_id.lstrip('/')
+        if not frame or frame == self.global_frame:
+            return target
+        found = self.tf.lookup(self.global_frame, frame)
+        if found is None:
+            rospy.logwarn(f'Failed to transform the goal pose from {frame} into the {self.global_frame} frame')
+            return None
+        pose = found[0].compose(pose_to_2d(target.pose))
+        return pose_stamped(pose, self.global_frame, target.header.stamp)
+
+    def _start_goal(self, target: PoseStamped) -> bool:
+        """Validate and start a goal; abort it (and return False) if it is unusable."""
+        p, q = target.pose.position, target.pose.orientation
+        problem = goal_problem(p.x, p.y, p.z, (q.x, q.y, q.z, q.w))
+        if problem is not None:
+            rospy.logwarn(f'{problem[0]}: {problem[1]}')
+            self.core.reset()
+            self.server.set_aborted(text=problem[0])
+            return False
+        goal = self._to_global(target)
+        if goal is None:
+            self.core.reset()
+            self.server.set_aborted(text=f'Failed to transform the goal pose from {target.header.frame_id} into '
+                                         f'the {self.global_frame} frame')
+            return False
+        p, q = goal.pose.position, goal.pose.orientation
+        outcome = self.core.new_goal(p.x, p.y, (q.x, q.y, q.z, q.w), rospy.get_time(), z=p.z)
+        if outcome is not None:
+            self.server.set_aborted(text=outcome.text)
+            return False
+        with self.controller_lock:
+            self.dwa.reset()
+        goal.header.frame_id = self.global_frame
+        self.current_goal_pub.publish(goal)
+        rospy.loginfo(f'move_base: new goal ({p.x:.2f}, {p.y:.2f}) in {self.global_frame}')
+        return True
+
+    def _execute(self, goal: MoveBaseGoal) -> None:
+        """The action's execute callback: ``MoveBase::executeCb``."""
+        if not self._start_goal(goal.target_pose):
+            return
+        frequency = self.core.cfg.controller_frequency
+        rate = rospy.Rate(frequency)
+        while not rospy.is_shutdown():
+            if self.core.cfg.controller_frequency != frequency:
+                frequency = self.core.cfg.controller_frequency
+                rate = rospy.Rate(frequency)
+            if self.server.is_preempt_requested():
+                if self.server.is_new_goal_available():
+                    if not self._start_goal(self.server.accept_new_goal().target_pose):
+                        self.publish_zero()
+                        return
+                else:
+                    self.core.reset()
+                    self.publish_zero()
+                    self.server.set_preempted()
+                    return
+            start_wall = time.perf_counter()
+            result = self.core.cycle(rospy.get_time())
+            elapsed = time.perf_counter() - start_wall
+            self.control_times.append(elapsed)
+            if result.pose is not None:
+                self.server.publish_feedback(MoveBaseFeedback(
+                    base_position=pose_stamped(result.pose, self.global_frame, rospy.Time.now())))
+            if result.recovery is not None:
+                self._publish_recovery_status(result)
+            if result.cmd is not None:
+                self._publish_cmd(result.cmd)
+            if result.outcome is not None:
+                self.publish_zero()
+                if result.outcome.status == 'SUCCEEDED':
+                    self.server.set_succeeded(text=result.outcome.text)
+                else:
+                    self.server.set_aborted(text=result.outcome.text)
+                return
+            if elapsed > 1.0 / frequency:
+                rospy.logwarn_throttle(5.0, f'Control loop missed its desired rate of {frequency:.4f}Hz... the loop '
+                                            f'actually took {elapsed:.4f} seconds')
+            try:
+                rate.sleep()
+            except rospy.exceptions.ROSTimeMovedBackwardsException:
+                pass
+            except rospy.ROSInterruptException:
+                break
+        if self.server.is_active():
+            self.core.reset()
+            self.server.set_aborted(text='Aborting on the goal because the node has been killed')
+
+    def _publish_recovery_status(self, result) -> None:
+        index, total, name = result.recovery
+        msg = RecoveryStatus()
+        msg.pose_stamped = pose_stamped(result.pose, self.global_frame, rospy.Time.now())
+        msg.current_recovery_number = index
+        msg.total_number_of_recoveries = total
+        msg.recovery_behavior_name = name
+        self.recovery_status_pub.publish(msg)
+
+    def _planner_loop(self) -> None:
+        """``MoveBase::planThread``: plan whenever the state machine wants a plan."""
+        while not rospy.is_shutdown():
+            try:
+                now = rospy.get_time()
+                if self.core.planner_due(now):
+                    self.core.run_planner(now, clock=rospy.get_time)
+                else:
+                    time.sleep(0.02)
+            except Exception as exc:     # never let the planner thread die silently
+                rospy.logerr_throttle(5.0, f'planner thread: {exc!r}')
+                time.sleep(0.1)
+
+    # ================================================================================================
+    # services
+
+    def _plan_between(self, start: Pose2D, goal: Pose2D, tolerance: float) -> np.ndarray:
+        return self.planner.make_plan(self.global_costmap.planning_grid(), start, goal, tolerance)
+
+    def _make_plan_service(self, req) -> GetPlanResponse:
+        """``~make_plan``: as ``MoveBase::planService``."""
+        if self.server.is_active():
+            rospy.logerr('move_base must be in an inactive state to make a plan for an external user')
+            raise rospy.ServiceException('move_base must be in an inactive state to make a plan for an external user')
+        return self._plan_service(req, clear=self.core.cfg.make_plan_clear_costmap,
+                                  add_goal=self.core.cfg.make_plan_add_unreachable_goal)
+
+    def _navfn_make_plan(self, req) -> GetPlanResponse:
+        """``~NavfnROS/make_plan``: the planner's own service."""
+        return self._plan_service(req, clear=False, add_goal=False)
+
+    def _plan_service(self, req, clear: bool, add_goal: bool) -> GetPlanResponse:
+        empty = GetPlanResponse()
+        empty.plan.header.frame_id = self.global_frame
+        empty.plan.header.stamp = rospy.Time.now()
+        gp, gq = req.goal.pose.position, req.goal.pose.orientation
+        problem = goal_problem(gp.x, gp.y, gp.z, (gq.x, gq.y, gq.z, gq.w))
+        if problem is not None:
+            rospy.logwarn(f'make_plan: {problem[0]}: {problem[1]}')
+            return empty
+        if not self.global_costmap.has_map:
+            rospy.logwarn('make_plan: the global costmap has no map yet')
+            return empty
+        if req.start.header.frame_id:
+            start_msg = self._to_global(req.start)
+            start = pose_to_2d(start_msg.pose) if start_msg is not None else None
+        else:
+            start = self.robot_pose()
+        goal_msg = self._to_global(req.goal)
+        if start is None or goal_msg is None:
+            rospy.logerr('move_base cannot make a plan for you because it could not get the start pose of the robot')
+            return empty
+        goal = pose_to_2d(goal_msg.pose)
+        if clear:
+            robot = self.global_costmap.robot_pose()
+            if robot is not None:
+                self.global_costmap.clear(robot, 2.0 * self.params.clearing_radius, invert=True)
+        try:
+            plan = self._plan_between(start, goal, max(0.0, req.tolerance))
+        except PlanningError as err:
+            rospy.logwarn(f'make_plan: {err.text}')
+            return empty
+        if add_goal and (abs(plan[-1, 0] - goal.x) > 1e-9 or abs(plan[-1, 1] - goal.y) > 1e-9):
+            plan = path_with_headings(np.append(plan[:, 0], goal.x), np.append(plan[:, 1], goal.y), goal.yaw)
+        resp = GetPlanResponse()
+        resp.plan = path_msg(plan, self.global_frame, rospy.Time.now())
+        return resp
+
+    def _clear_costmaps_service(self, req) -> EmptyResponse:
+        self.global_costmap.clear()
+        self.local_costmap.clear()
+        rospy.loginfo('move_base: costmaps cleared')
+        return EmptyResponse()
+
+    # ================================================================================================
+    # dynamic_reconfigure
+
+    def _on_move_base_cfg(self, config: Dict, level: int) -> Dict:
+        if self._mb_defaults is None:
+            self._mb_defaults = dict(config)
+        if config.get('restore_defaults'):
+            config = dict(self._mb_defaults)
+            config['restore_defaults'] = False
+        for key, allowed in (('base_global_planner', GLOBAL_PLANNERS), ('base_local_planner', LOCAL_PLANNERS)):
+            if config[key] not in allowed:
+                rospy.logerr(f'{key}: {config[key]} is not available (implemented: {", ".join(allowed)}); '
+                             'keeping the current one')
+                config[key] = getattr(self.params, key)
+        new = move_base_config(config)
+        with self.core.lock:
+            self.core.cfg = new
+            for rec in self.core.recoveries:
+                if isinstance(rec, ClearCostmapRecovery) and rec.name == 'conservative_reset':
+                    rec.cfg = dataclasses.replace(rec.cfg, reset_distance=new.conservative_reset_dist)
+        with self.controller_lock:
+            self.dwa.set_controller_frequency(new.controller_frequency)
+        return config
+
+    def _on_dwa_cfg(self, config: Dict, level: int) -> Dict:
+        if self._dwa_defaults is None:
+            self._dwa_defaults = dict(config)
+        if config.get('restore_defaults'):
+            config = dict(self._dwa_defaults)
+            config['restore_defaults'] = False
+        with self.controller_lock:
+            self.dwa.cfg = dwa_config(config, self.dwa_extra)
+        return config
+
+
+@cnr_params.exit_on_config_error
+def main() -> None:
+    rospy.init_node('move_base')
+    reader = RosParamReader()
+    params = read_navigation_params(reader, rospy.get_name())
+    for warning in params.warnings:
+        rospy.logwarn(warning)
+    node = MoveBaseNode(params)
+    calls = dict(reader.calls)
+    rospy.loginfo(f'move_base ready: {sum(calls.values())} parameter calls before the reconfigure servers '
+                  f'({", ".join(f"{k} {v}" for k, v in sorted(calls.items()))}); controller '
+                  f'{node.core.cfg.controller_frequency:g} Hz, planner {node.core.cfg.planner_frequency:g} Hz')
+    rospy.spin()
