@@ -1,0 +1,207 @@
+"""Battery of the TurtleBot 2 with a drain model whose inputs are measured.
+
+ROS-free. Power drawn from the 14.8 V Li-ion pack [W]:
+
+    P = P_base_idle + P_laptop_idle                                 (constant, from config)
+      + (m g c_rr |v| + m |a v| + I |alpha w| + c_turn |w|) / eta     (motors, from the simulated motion)
+    E_cpu   = k_cpu  * (CPU seconds actually used by the robot's processes, measured with psutil)
+    E_radio = e_byte * (bytes actually sent + received on the robot's interface, measured with psutil)
+
+Energy integrates over sim time for the first two terms; the CPU and radio terms are energy for work
+that really happened, so they do not depend on the real-time factor. State of charge drops by
+E / V_nominal; the reported voltage follows Kobuki's linear mapping between 13.2 V (empty) and
+16.5 V (full) (kobuki_driver battery.cpp: % = 95 (V - 13.2) / (16.5 - 13.2) + 5).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Dict, Iterable, Optional, Set
+
+from cnr_params import Section
+
+
+@dataclass
+class BatteryConfig:
+    """Constants of the model (every one set in config/battery.yaml with its source)."""
+
+    capacity_ah: float = 2.2
+    nominal_voltage: float = 14.8
+    full_voltage: float = 16.5
+    empty_voltage: float = 13.2
+    initial_percentage: float = 100.0
+    base_idle_power: float = 5.0
+    laptop_idle_power: float = 8.0
+    mass: float = 6.3
+    rolling_resistance: float = 0.02
+    yaw_inertia: float = 0.05
+    turn_resistance_power: float = 1.0
+    motor_efficiency: float = 0.5
+    cpu_joules_per_cpu_second: float = 7.5
+    radio_joules_per_byte: float = 7.0e-6
+    gravity: float = 9.81
+
+    @classmethod
+    def from_section(cls, s: Section) -> 'BatteryConfig':
+        kw = {}
+        for name, default in cls().__dict__.items():
+            if name in ('initial_percentage',):
+                kw[name] = s.number(name, default, minimum=0.0, maximum=100.0)
+            else:
+                kw[name] = s.number(name, default, nonnegative=True)
+        cfg = cls(**kw)
+        for key in ('capacity_ah', 'nominal_voltage', 'motor_efficiency'):
+            if not getattr(cfg, key) > 0:
+                raise s.error(key, 'must be > 0')
+        if not cfg.full_voltage > cfg.empty_voltage:
+            raise s.error('full_voltage', 'must be greater than empty_voltage')
+        return cfg
+
+
+@dataclass
+class EnergyBreakdown:
+    """Energy used so far per consumer [J]."""
+
+    idle: float = 0.0
+    motors: float = 0.0
+    cpu: float = 0.0
+    radio: float = 0.0
+
+    @property
+    def total(self) -> float:
+        return self.idle + self.motors + self.cpu + self.radio
+
+
+class BatteryModel:
+    """Integrates the drain; ``percentage``/``voltage``/``charge`` describe the pack.
+
+    Args:
+        config: the constants.
+    """
+
+    def __init__(self, config: BatteryConfig) -> None:
+        self.config = config
+        self.capacity_j = config.capacity_ah * 3600.0 * config.nominal_voltage
+        self.energy = EnergyBreakdown()
+        self.power = 0.0          # latest total power [W] (idle + motors + measured work rate)
+        self._cpu_rate = 0.0
+        self._radio_rate = 0.0
+
+    def motor_power(self, v: float, w: float, accel: float, alpha: float) -> float:
+        """Electrical motor power [W] for speed v [m/s], yaw rate w [rad/s] and their derivatives."""
+        c = self.config
+        mech = (c.mass * c.gravity * c.rolling_resistance * abs(v) + c.mass * abs(accel * v)
+                + c.yaw_inertia * abs(alpha * w) + c.turn_resistance_power * abs(w) / math.pi)
+        return mech / c.motor_efficiency
+
+    def step(self, dt: float, v: float, w: float, accel: float, alpha: float) -> None:
+        """Advance sim time by dt [s] with the base's motion over the step."""
+        c = self.config
+        idle = (c.base_idle_power + c.laptop_idle_power) * dt
+        motors = self.motor_power(v, w, accel, alpha) * dt
+        self.energy.idle += idle
+        self.energy.motors += motors
+        self.power = (idle + motors) / dt + self._cpu_rate + self._radio_rate if dt > 0 else self.power
+
+    def add_work(self, cpu_seconds: float, bytes_transferred: float, interval: float) -> None:
+        """Account measured CPU time [s] and radio traffic [bytes] that happened over ``interval`` [s]."""
+        c = self.config
+        e_cpu = c.cpu_joules_per_cpu_second * max(cpu_seconds, 0.0)
+        e_radio = c.radio_joules_per_byte * max(bytes_transferred, 0.0)
+        self.energy.cpu += e_cpu
+        self.energy.radio += e_radio
+        if interval > 0:
+            self._cpu_rate = e_cpu / interval
+            self._radio_rate = e_radio / interval
+
+    @property
+    def percentage(self) -> float:
+        """State of charge [%]."""
+        initial = self.config.initial_percentage / 100.0 * self.capacity_j
+        return max(0.0, initial - self.energy.total) / self.capacity_j * 100.0
+
+    @property
+    def charge_ah(self) -> float:
+        return self.percentage / 100.0 * self.config.capacity_ah
+
+    @property
+    def voltage(self) -> float:
+        """Pack voltage [V] from Kobuki's linear percentage mapping (inverted)."""
+        c = self.config
+        pct = self.percentage
+        return c.empty_voltage + max(pct - 5.0, 0.0) / 95.0 * (c.full_voltage - c.empty_voltage)
+
+    @property
+    def current(self) -> float:
+        """Discharge current [A] (negative: discharging, as sensor_msgs/BatteryState)."""
+        return -self.power / max(self.voltage, 1e-6)
+
+
+class CpuMeter:
+    """CPU seconds used by a changing set of processes (psutil cpu_times deltas)."""
+
+    def __init__(self) -> None:
+        import psutil
+        self._psutil = psutil
+        self._procs: Dict[int, object] = {}
+        self._last: Dict[int, float] = {}
+        self.dead: Set[int] = set()
+
+    def set_pids(self, pids: Iterable[int]) -> None:
+        pids = set(pids)
+        for pid in list(self._procs):
+            if pid not in pids:
+                self._procs.pop(pid)
+                self._last.pop(pid, None)
+        for pid in pids - set(self._procs):
+            try:
+                proc = self._psutil.Process(pid)
+                t = proc.cpu_times()
+            except (self._psutil.NoSuchProcess, self._psutil.AccessDenied):
+                self.dead.add(pid)
+                continue
+            self._procs[pid] = proc
+            self._last[pid] = t.user + t.system
+
+    @property
+    def pids(self) -> Set[int]:
+        return set(self._procs)
+
+    def sample(self) -> float:
+        """CPU seconds used since the previous sample by the tracked processes."""
+        used = 0.0
+        for pid, proc in list(self._procs.items()):
+            try:
+                t = proc.cpu_times()
+            except (self._psutil.NoSuchProcess, self._psutil.AccessDenied):
+                self._procs.pop(pid)
+                self._last.pop(pid, None)
+                self.dead.add(pid)
+                continue
+            total = t.user + t.system
+            used += max(total - self._last[pid], 0.0)
+            self._last[pid] = total
+        return used
+
+
+class NetMeter:
+    """Bytes sent + received on an interface ('' = every interface except loopback)."""
+
+    def __init__(self, interface: str = '') -> None:
+        import psutil
+        self._psutil = psutil
+        self.interface = interface
+        self._last: Optional[int] = None
+
+    def _total(self) -> int:
+        counters = self._psutil.net_io_counters(pernic=True)
+        if self.interface:
+            c = counters.get(self.interface)
+            return 0 if c is None else c.bytes_sent + c.bytes_recv
+        return sum(c.bytes_sent + c.bytes_recv for name, c in counters.items() if name != 'lo')
+
+    def sample(self) -> int:
+        """Bytes moved since the previous sample."""
+        total = self._total()
+        prev, self._last = self._last, total
+        return 0 if prev is None else max(total - prev, 0)

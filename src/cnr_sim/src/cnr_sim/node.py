@@ -1,0 +1,309 @@
+"""The ``simulator`` node: ROS I/O around :class:`cnr_sim.core.world.World` (a stage_ros look-alike).
+
+Publishes /clock, odom, base_pose_ground_truth, scan, battery_state, obstacles, collision events and
+tf; subscribes mobile_base/commands/velocity; services reset_positions and teleport. Every topic,
+service and parameter is documented in the package README.
+"""
+from __future__ import annotations
+
+import math
+import socket
+import threading
+import time
+from typing import Optional, Set
+from urllib.parse import urlparse
+from xmlrpc.client import ServerProxy
+
+import numpy as np
+import rospy
+import tf2_ros
+from geometry_msgs.msg import Pose, PoseArray, Quaternion, TransformStamped, Twist
+from nav_msgs.msg import Odometry
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import BatteryState, LaserScan
+from std_srvs.srv import Empty, EmptyResponse
+
+import cnr_params
+from cnr_msgs.msg import Collision
+from cnr_msgs.srv import Teleport, TeleportResponse
+from cnr_params.ros import private_section
+from cnr_sim.core.battery import BatteryModel, CpuMeter, NetMeter
+from cnr_sim.core.kinematics import Pose2D
+from cnr_sim.core.mapio import load_map
+from cnr_sim.core.world import World
+from cnr_sim.params import SimulatorParams, read_params
+
+
+def yaw_quaternion(yaw: float) -> Quaternion:
+    return Quaternion(0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw))
+
+
+def transform(stamp: rospy.Time, parent: str, child: str, x: float, y: float, yaw: float,
+              z: float = 0.0) -> TransformStamped:
+    t = TransformStamped()
+    t.header.stamp = stamp
+    t.header.frame_id = parent
+    t.child_frame_id = child
+    t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = x, y, z
+    t.transform.rotation = yaw_quaternion(yaw)
+    return t
+
+
+class RobotProcesses:
+    """PIDs of the nodes registered on this master that run on this host (slave API getPid)."""
+
+    def __init__(self, caller_id: str) -> None:
+        self.caller_id = caller_id
+        self._local = self._local_addresses()
+        self._resolved = {}
+
+    @staticmethod
+    def _local_addresses() -> Set[str]:
+        import psutil
+        addrs = {'localhost', socket.gethostname(), socket.getfqdn()}
+        for entries in psutil.net_if_addrs().values():
+            for a in entries:
+                if a.family in (socket.AF_INET, socket.AF_INET6):
+                    addrs.add(a.address.split('%')[0])
+        return addrs
+
+    def _is_local(self, host: str) -> bool:
+        if host in self._local or host.startswith('127.'):
+            return True
+        if host not in self._resolved:
+            try:
+                self._resolved[host] = socket.gethostbyname(host)
+            except OSError:
+                self._resolved[host] = ''
+        ip = self._resolved[host]
+        return ip in self._local or ip.startswith('127.')
+
+    def pids(self) -> Set[int]:
+        import rosgraph
+        master = rosgraph.Master(self.caller_id)
+        pubs, subs, srvs = master.getSystemState()
+        nodes = {n for _, names in pubs + subs + srvs for n in names}
+        out = set()
+        for name in nodes:
+            try:
+                uri = master.lookupNode(name)
+                if not self._is_local(urlparse(uri).hostname or ''):
+                    continue
+                code, _, pid = ServerProxy(uri).getPid(self.caller_id)
+                if code == 1:
+                    out.add(int(pid))
+            except Exception:  # a node that went away between the two calls
+                continue
+        return out
+
+
+class SimulatorNode:
+    def __init__(self, params: SimulatorParams) -> None:
+        self.p = params
+        grid = load_map(params.map_file)
+        self.grid = grid
+        self.battery = BatteryModel(params.battery)
+        try:
+            self.world = World(grid, params.limits, params.laser, params.world, params.initial_pose,
+                               params.obstacles, self.battery, np.random.default_rng(params.seed or None))
+        except ValueError as exc:
+            raise cnr_params.ConfigError(rospy.get_name(), 'initial_pose', str(exc))
+        self.lock = threading.Lock()
+        ns = rospy.get_name()
+        self.clock_pub = rospy.Publisher('/clock', Clock, queue_size=10)
+        self.odom_pub = rospy.Publisher('odom', Odometry, queue_size=10)
+        self.gt_pub = rospy.Publisher('base_pose_ground_truth', Odometry, queue_size=10)
+        self.scan_pub = rospy.Publisher('scan', LaserScan, queue_size=5)
+        self.battery_pub = rospy.Publisher('battery_state', BatteryState, queue_size=2)
+        self.collision_pub = rospy.Publisher('mobile_base/events/collision', Collision, queue_size=10)
+        self.obstacles_pub = rospy.Publisher('obstacles', PoseArray, queue_size=2)
+        self.tf = tf2_ros.TransformBroadcaster()
+        self.static_tf = tf2_ros.StaticTransformBroadcaster()
+        rospy.Subscriber('mobile_base/commands/velocity', Twist, self._on_cmd, queue_size=5)
+        rospy.Service('reset_positions', Empty, self._on_reset)
+        rospy.Service('teleport', Teleport, self._on_teleport)
+        self._scan_msg = self._scan_template()
+        self._procs = RobotProcesses(ns)
+        self._cpu = CpuMeter() if params.battery_enabled else None
+        self._net = NetMeter(params.battery_interface) if params.battery_enabled else None
+        self._next_battery = 0.0
+        self.rtf_achieved = 0.0
+
+    # -- callbacks -----------------------------------------------------------------------------
+    def _on_cmd(self, msg: Twist) -> None:
+        v, w = msg.linear.x, msg.angular.z
+        if not (math.isfinite(v) and math.isfinite(w)):
+            rospy.logwarn_throttle(5.0, f'rejected velocity command with non-finite values ({v}, {w})')
+            return
+        with self.lock:
+            self.world.command(v, w)
+
+    def _on_reset(self, _req) -> EmptyResponse:
+        with self.lock:
+            self.world.reset()
+        rospy.loginfo('reset to the start pose')
+        return EmptyResponse()
+
+    def _on_teleport(self, req) -> TeleportResponse:
+        pose = Pose2D(req.pose.x, req.pose.y, req.pose.theta)
+        with self.lock:
+            problem = self.world.teleport(pose, req.reset_odometry)
+        if problem:
+            rospy.logwarn(f'teleport to ({pose.x:.3f}, {pose.y:.3f}, {pose.yaw:.3f}) refused: {problem}')
+            return TeleportResponse(False, problem)
+        return TeleportResponse(True, 'ok')
+
+    # -- messages ------------------------------------------------------------------------------
+    def _scan_template(self) -> LaserScan:
+        c = self.p.laser
+        m = LaserScan()
+        m.header.frame_id = self.p.laser_frame
+        m.angle_min = c.angle_min
+        m.angle_max = c.angle_min + c.angle_increment * (c.beams - 1)
+        m.angle_increment = c.angle_increment
+        m.time_increment = 0.0
+        m.scan_time = 1.0 / c.rate
+        m.range_min = c.min_range
+        m.range_max = c.max_range
+        return m
+
+    def _odometry(self, stamp, frame: str, pose: Pose2D) -> Odometry:
+        o = Odometry()
+        o.header.stamp = stamp
+        o.header.frame_id = frame
+        o.child_frame_id = self.p.footprint_frame
+        o.pose.pose.position.x, o.pose.pose.position.y = pose.x, pose.y
+        o.pose.pose.orientation = yaw_quaternion(pose.yaw)
+        o.twist.twist.linear.x = self.world.base.v
+        o.twist.twist.angular.z = self.world.base.w
+        return o
+
+    def publish_static(self) -> None:
+        p = self.p
+        stamp = rospy.Time.from_sec(max(self.world.time, 1e-3))
+        self.static_tf.sendTransform([
+            transform(stamp, p.footprint_frame, p.base_frame, 0.0, 0.0, 0.0, p.base_height),
+            transform(stamp, p.base_frame, p.laser_frame, p.laser.offset_x, p.laser.offset_y, 0.0,
+                      p.laser_offset_z - p.base_height)])
+
+    def publish(self, collision) -> None:
+        w, p = self.world, self.p
+        stamp = rospy.Time.from_sec(w.time)
+        self.clock_pub.publish(Clock(stamp))
+        odom = self._odometry(stamp, p.odom_frame, w.odom)
+        self.odom_pub.publish(odom)
+        self.gt_pub.publish(self._odometry(stamp, p.map_frame, w.pose))
+        tfs = [transform(stamp, p.odom_frame, p.footprint_frame, w.odom.x, w.odom.y, w.odom.yaw)]
+        if p.publish_map_to_odom:
+            m2o = w.map_to_odom()
+            tfs.append(transform(stamp, p.map_frame, p.odom_frame, m2o.x, m2o.y, m2o.yaw))
+        self.tf.sendTransform(tfs)
+        if collision is not None:
+            c = Collision()
+            c.header.stamp = rospy.Time.from_sec(collision.time)
+            c.header.frame_id = p.map_frame
+            c.pose.x, c.pose.y, c.pose.theta = collision.pose.x, collision.pose.y, collision.pose.yaw
+            c.speed = collision.speed
+            c.obstacle = collision.obstacle
+            self.collision_pub.publish(c)
+            rospy.logwarn_throttle(2.0, f'collision with {collision.obstacle} at '
+                                        f'({collision.pose.x:.2f}, {collision.pose.y:.2f}); base stopped')
+        if w.scan_due():
+            ranges = w.scan()
+            msg = self._scan_msg
+            msg.header.stamp = stamp
+            msg.ranges = ranges.tolist()
+            self.scan_pub.publish(msg)
+            if w.obstacles:
+                centres, _ = w.obstacle_positions()
+                pa = PoseArray()
+                pa.header.stamp = stamp
+                pa.header.frame_id = p.map_frame
+                pa.poses = [Pose(position=_point(x, y), orientation=yaw_quaternion(0.0)) for x, y in centres]
+                self.obstacles_pub.publish(pa)
+        if w.time + 1e-9 >= self._next_battery:
+            self._next_battery = w.time + 1.0 / p.battery_rate
+            self.battery_pub.publish(self._battery_msg(stamp))
+
+    def _battery_msg(self, stamp) -> BatteryState:
+        b, c = self.battery, self.p.battery
+        m = BatteryState()
+        m.header.stamp = stamp
+        m.voltage = b.voltage
+        m.current = b.current
+        m.charge = b.charge_ah
+        m.capacity = c.capacity_ah
+        m.design_capacity = c.capacity_ah
+        m.percentage = b.percentage / 100.0
+        m.power_supply_status = BatteryState.POWER_SUPPLY_STATUS_DISCHARGING
+        m.power_supply_health = BatteryState.POWER_SUPPLY_HEALTH_GOOD
+        m.power_supply_technology = BatteryState.POWER_SUPPLY_TECHNOLOGY_LION
+        m.present = True
+        m.location = 'kobuki'
+        m.serial_number = (f'idle={b.energy.idle:.1f}J motors={b.energy.motors:.1f}J '
+                           f'cpu={b.energy.cpu:.1f}J radio={b.energy.radio:.1f}J')
+        return m
+
+    # -- loops ---------------------------------------------------------------------------------
+    def _measure_loop(self) -> None:
+        """Measure the robot's CPU time and radio bytes (wall-clock period) and feed the battery."""
+        period = self.p.battery_measure_period
+        last_refresh = -math.inf
+        last_sim = self.world.time
+        while not rospy.is_shutdown():
+            now = time.monotonic()
+            if now - last_refresh > 5.0:
+                last_refresh = now
+                try:
+                    self._cpu.set_pids(self._procs.pids())
+                except Exception as exc:
+                    rospy.logwarn_throttle(30.0, f'cannot list the robot processes on the master: {exc}')
+            cpu = self._cpu.sample()
+            net = self._net.sample()
+            with self.lock:
+                sim_dt = self.world.time - last_sim
+                last_sim = self.world.time
+                self.battery.add_work(cpu, net, sim_dt)
+            time.sleep(period)
+
+    def run(self) -> None:
+        self.publish_static()
+        if self._cpu is not None:
+            threading.Thread(target=self._measure_loop, name='battery_meter', daemon=True).start()
+        rtf = self.p.real_time_factor
+        dt = self.p.world.step
+        wall0, sim0 = time.monotonic(), self.world.time
+        report_wall, report_sim = wall0, sim0
+        rospy.loginfo(f'simulating {self.grid.source} at '
+                      f'{"as fast as possible" if rtf == 0 else f"{rtf:g}x real time"}')
+        while not rospy.is_shutdown():
+            with self.lock:
+                event = self.world.step()
+                self.publish(event)
+                sim = self.world.time
+            if rtf > 0:
+                target = wall0 + (sim - sim0) / rtf
+                lag = target - time.monotonic()
+                if lag > 0:
+                    time.sleep(lag)
+                elif lag < -0.5:      # cannot keep up: restart the schedule instead of bursting
+                    rospy.logwarn_throttle(10.0, f'cannot keep {rtf:g}x real time')
+                    wall0, sim0 = time.monotonic(), sim
+            now = time.monotonic()
+            if now - report_wall >= 5.0:
+                self.rtf_achieved = (sim - report_sim) / (now - report_wall)
+                rospy.logdebug(f'achieved real-time factor {self.rtf_achieved:.2f}')
+                report_wall, report_sim = now, sim
+
+
+def _point(x: float, y: float):
+    from geometry_msgs.msg import Point
+    return Point(float(x), float(y), 0.0)
+
+
+@cnr_params.exit_on_config_error
+def main() -> None:
+    rospy.init_node('simulator')
+    params = read_params(private_section('~'))
+    node = SimulatorNode(params)
+    node.run()
