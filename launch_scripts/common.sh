@@ -63,21 +63,16 @@ cnr_ensure_master() {
 
 # Stop everything this script started: SIGINT (as roslaunch does), then SIGTERM, then SIGKILL.
 cnr_cleanup() {
-  local pid sig n
+  # Stop what this script started, newest first (nodes before their master): SIGINT, then TERM, then KILL.
+  local pid sig n i
   trap - INT TERM EXIT
-  for sig in INT TERM KILL; do
-    local alive=0
-    for pid in "${CNR_PIDS[@]}"; do
-      kill -0 "$pid" 2>/dev/null || continue
+  local rev=()
+  for ((i=${#CNR_PIDS[@]}-1; i>=0; i--)); do rev+=("${CNR_PIDS[$i]}"); done
+  for pid in "${rev[@]}"; do
+    for sig in INT TERM KILL; do
+      kill -0 "$pid" 2>/dev/null || break
       kill -s "$sig" -- "-$pid" 2>/dev/null || kill -s "$sig" "$pid" 2>/dev/null || true
-      alive=1
-    done
-    [ "$alive" = 1 ] || break
-    for n in $(seq 1 50); do
-      alive=0
-      for pid in "${CNR_PIDS[@]}"; do kill -0 "$pid" 2>/dev/null && alive=1; done
-      [ "$alive" = 1 ] || break
-      sleep 0.2
+      for n in $(seq 1 50); do kill -0 "$pid" 2>/dev/null || break; sleep 0.2; done
     done
   done
 }

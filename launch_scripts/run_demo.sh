@@ -27,16 +27,8 @@ cnr_master_uri "" "$port"
 cnr_master_up && cnr_die "a master already runs at $ROS_MASTER_URI; stop it or choose --port"
 cnr_ensure_master
 cnr_spawn "$CNR_WS/launch_scripts/bringup.sh" --map "$map" --rtf "$rtf"
-cnr_log "waiting for move_base's action server"
-/usr/bin/python3 - <<'PY' || cnr_die "move_base did not come up (see ~/.ros/log/latest)"
-import rospy, actionlib
-from move_base_msgs.msg import MoveBaseAction
-rospy.init_node('run_demo_wait', anonymous=True, disable_signals=True)
-ok = actionlib.SimpleActionClient('move_base', MoveBaseAction).wait_for_server(rospy.Duration(120))
-raise SystemExit(0 if ok else 1)
-PY
 set +e
-rosrun cnr_navigation goal_sequencer --goals "$goals"
+rosrun cnr_navigation goal_sequencer --goals "$goals" --server-timeout 180
 rc=$?
 set -e
 [ $rc = 0 ] && cnr_log "demo finished: every goal reached" || cnr_log "demo finished: some goals failed (exit $rc)"
