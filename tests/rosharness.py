@@ -103,7 +103,7 @@ class RosMaster:
         return proc
 
     def roslaunch(self, package: str, launch_file: str, *args: str) -> Proc:
-        return self.run(['roslaunch', '--wait', package, launch_file, *args], log_name=launch_file)
+        return self.run(['roslaunch', package, launch_file, *args], log_name=launch_file)   # master is up already
 
     def node_names(self) -> List[str]:
         state = self.proxy.getSystemState('/pytest')[2]

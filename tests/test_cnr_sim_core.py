@@ -1,0 +1,188 @@
+"""Simulator cores without a master: ray casting, kinematics and limits, collisions, battery."""
+import math
+
+import numpy as np
+import pytest
+
+from cnr_params import ConfigError, Section
+from cnr_sim.core.battery import BatteryConfig, BatteryModel, CpuMeter
+from cnr_sim.core.kinematics import BaseLimits, DiffDrive, Pose2D, integrate
+from cnr_sim.core.laser import FakeLaser, LaserConfig
+from cnr_sim.core.mapio import OccupancyMap
+from cnr_sim.core.obstacles import MovingObstacle, obstacles_from_config
+from cnr_sim.core.raycast import cast_rays, circle_hits
+from cnr_sim.core.world import World, WorldConfig
+
+RES = 0.05
+
+
+def box_map(size=200, wall_col=150):
+    """A 10 m x 10 m free square with a wall at x = wall_col * RES and a border."""
+    data = np.zeros((size, size), dtype=np.int8)
+    data[:, wall_col:] = 100
+    data[0, :] = data[-1, :] = data[:, 0] = 100
+    return OccupancyMap(data=data, resolution=RES, origin=(0.0, 0.0, 0.0))
+
+
+def test_raycast_matches_analytic_distances():
+    m = box_map()
+    obstacle = m.data >= 50
+    wall_x = 150 * RES
+    x, y = 2.013, 5.021
+    angles = np.radians(np.linspace(-30, 30, 61))
+    out = np.empty_like(angles)
+    cast_rays(obstacle, RES, 0.0, 0.0, x, y, angles, 50.0, out)
+    expected = (wall_x - x) / np.cos(angles)
+    assert np.allclose(out, expected, atol=1e-9)
+
+
+def test_raycast_max_range_and_leaving_map():
+    data = np.zeros((20, 20), dtype=np.int8)
+    out = np.empty(2)
+    cast_rays(data >= 50, RES, 0.0, 0.0, 0.5, 0.5, np.array([0.0, math.pi / 2]), 0.2, out)
+    assert np.all(np.isinf(out))
+
+
+def test_circle_hits_analytic():
+    d = circle_hits(0.0, 0.0, np.array([0.0, math.pi / 2, math.atan2(0.1, 2.0)]), np.array([[2.0, 0.0]]), np.array([0.5]))
+    assert d[0] == pytest.approx(1.5)
+    assert math.isinf(d[1])
+    assert d[2] < 2.0
+
+
+def test_fake_laser_conventions():
+    m = box_map()
+    cfg = LaserConfig(offset_x=0.0, offset_y=0.0, max_range=5.0)
+    laser = FakeLaser(cfg, m.data >= 50, RES, (0, 0))
+    assert cfg.beams == 640 and cfg.angle_increment == pytest.approx(math.radians(58) / 639)
+    ranges = laser.scan(5.0, 5.0, 0.0)                      # wall 2.5 m ahead
+    assert ranges[320] == pytest.approx(2.5 / math.cos(cfg.relative_angles[320]), abs=1e-9)
+    ranges = laser.scan(1.0, 5.0, math.pi)                  # border 1 m behind... no: facing the x=0 border
+    assert np.nanmin(ranges) > 0.9
+    far = laser.scan(5.0, 5.0, math.pi)                     # facing the border 5 m away -> beyond 5 m -> max_range
+    assert np.all(far[np.abs(cfg.relative_angles) > 0.2] == cfg.max_range)
+    close = laser.scan(7.3, 5.0, 0.0)                       # wall 0.2 m ahead: below min_range -> NaN
+    assert np.isnan(close[320])
+    with_person = laser.scan(5.0, 5.0, 0.0, np.array([[6.0, 5.0]]), np.array([0.25]))
+    assert with_person[320] == pytest.approx(0.75, abs=1e-6)
+
+
+def test_velocity_limits_acceleration_and_watchdog():
+    base = DiffDrive(BaseLimits())
+    base.command(5.0, -10.0, now=0.0)
+    assert base.cmd_v == 0.70 and base.cmd_w == pytest.approx(-math.pi)
+    v, w = base.update(0.0, 0.02)
+    assert v == pytest.approx(0.02) and w == pytest.approx(-0.04)      # 1.0 m/s^2 and 2.0 rad/s^2
+    t = 0.0
+    while t < 0.55:
+        t += 0.02
+        v, w = base.update(t, 0.02)
+    assert v > 0.5
+    for _ in range(100):                                                # no command for > 0.6 s
+        t += 0.02
+        v, w = base.update(t, 0.02)
+    assert v == 0.0 and w == 0.0
+    with pytest.raises(ValueError):
+        base.command(float('nan'), 0.0, now=t)
+
+
+def test_integrate_exact_arc():
+    p = integrate(Pose2D(0, 0, 0), 1.0, math.pi / 2, 1.0)              # quarter circle of radius 2/pi
+    r = 2 / math.pi
+    assert (p.x, p.y, p.yaw) == pytest.approx((r, r, math.pi / 2))
+
+
+def make_world(**kw):
+    return World(box_map(), BaseLimits(), LaserConfig(), WorldConfig(), Pose2D(5.0, 5.0, 0.0), **kw)
+
+
+def test_collision_stalls_and_reports_once():
+    w = make_world()
+    events = []
+    for i in range(500):
+        w.command(0.5, 0.0)
+        e = w.step()
+        if e:
+            events.append(e)
+    assert len(events) == 1 and events[0].obstacle == 'map'
+    assert w.base.v == 0.0
+    assert w.pose.x < 150 * RES - 0.178 + 1e-9                        # never inside the wall
+    for _ in range(100):                                               # backing away is allowed
+        w.command(-0.3, 0.0)
+        w.step()
+    assert w.pose.x < 7.0 and not w.in_contact
+
+
+def test_moving_obstacle_blocks_robot():
+    person = MovingObstacle('person', np.array([[6.0, 5.0], [6.0, 5.0001]]), speed=0.1, radius=0.25)
+    w = make_world(obstacles=[person])
+    hit = None
+    for _ in range(300):
+        w.command(0.5, 0.0)
+        hit = w.step() or hit
+    assert hit is not None and hit.obstacle == 'person'
+    assert w.pose.x < 6.0 - 0.25 - 0.178 + 1e-9
+
+
+def test_teleport_refuses_bad_poses():
+    w = make_world()
+    assert w.teleport(Pose2D(100.0, 0.0, 0.0)) == 'outside the map'
+    assert 'collision' in w.teleport(Pose2D(7.6, 5.0, 0.0))
+    assert w.teleport(Pose2D(float('nan'), 5.0, 0.0)) == 'not finite'
+    assert w.teleport(Pose2D(3.0, 3.0, 1.0)) == ''
+    assert (w.pose.x, w.pose.y) == (3.0, 3.0)
+    w.reset()
+    assert (w.pose.x, w.pose.y, w.odom.x) == (5.0, 5.0, 0.0)
+
+
+def test_perfect_localization_map_to_odom():
+    w = make_world()
+    for _ in range(100):
+        w.command(0.3, 0.4)
+        w.step()
+    gt = w.map_to_odom().compose(w.odom)
+    assert (gt.x, gt.y, gt.yaw) == pytest.approx((w.pose.x, w.pose.y, w.pose.yaw))
+
+
+def test_battery_reacts_to_motion_cpu_and_radio():
+    cfg = BatteryConfig()
+    idle, moving, working = BatteryModel(cfg), BatteryModel(cfg), BatteryModel(cfg)
+    for _ in range(500):
+        idle.step(0.02, 0.0, 0.0, 0.0, 0.0)
+        moving.step(0.02, 0.5, 0.5, 0.0, 0.0)
+        working.step(0.02, 0.0, 0.0, 0.0, 0.0)
+    working.add_work(cpu_seconds=2.0, bytes_transferred=10e6, interval=10.0)
+    assert idle.energy.total == pytest.approx((cfg.base_idle_power + cfg.laptop_idle_power) * 10.0)
+    assert moving.energy.motors > 0 and moving.percentage < idle.percentage
+    assert working.energy.cpu == pytest.approx(2.0 * cfg.cpu_joules_per_cpu_second)
+    assert working.energy.radio == pytest.approx(10e6 * cfg.radio_joules_per_byte)
+    assert working.percentage < idle.percentage
+    assert 13.2 <= idle.voltage <= 16.5
+
+
+def test_battery_config_from_repository_file(workspace):
+    sec = Section.from_file(f'{workspace}/config/battery.yaml').section('battery')
+    cfg = BatteryConfig.from_section(sec)
+    assert cfg.capacity_ah == 2.2 and cfg.nominal_voltage == 14.8
+    with pytest.raises(ConfigError):
+        BatteryConfig.from_section(Section({'capacity_ah': -1.0}, 'battery.yaml'))
+
+
+def test_cpu_meter_measures_this_process():
+    import os
+    meter = CpuMeter()
+    meter.set_pids([os.getpid()])
+    meter.sample()
+    x = 0
+    for i in range(2_000_000):
+        x += i
+    assert meter.sample() > 0.01
+
+
+def test_obstacles_config_errors():
+    with pytest.raises(ConfigError) as err:
+        obstacles_from_config(Section({'obstacles': [{'waypoints': [[0, 0]], 'speed': 1, 'radius': 0.2}]}, 'o.yaml'))
+    assert 'waypoints' in str(err.value)
+    with pytest.raises(ConfigError):
+        obstacles_from_config(Section({'obstacles': [{'waypoints': [[0, 0], [1, 1]], 'speed': 0, 'radius': 0.2}]},
+                                      'o.yaml'))
