@@ -1,0 +1,118 @@
+"""Navigation cores without a master: inflation costs, planning on small grids, the DWA controller."""
+import math
+
+import numpy as np
+import pytest
+
+from cnr_navigation.core.costmap import (INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, CostmapConfig,
+                                         GridGeometry, InflationLayerConfig, LayeredCostmap, ObstacleLayerConfig,
+                                         inflate, inflation_cost_of_distance, scan_to_observation)
+from cnr_navigation.core.dwa import DWAConfig, DWAController
+from cnr_navigation.core.geometry import Pose2D
+from cnr_navigation.core.planner import GlobalPlanner, PlannerConfig, PlanningError, PlanningGrid
+
+RES = 0.05
+
+
+def test_inflation_cost_formula():
+    k, r_ins, r_inf = 5.0, 0.2, 0.5
+    d = np.array([0.0, 0.1, 0.2, 0.25, 0.3, 0.45, 0.5, 0.55, 1.0])
+    cost = inflation_cost_of_distance(d, RES, r_ins, r_inf, k)
+    assert cost[0] == LETHAL_OBSTACLE
+    assert cost[1] == cost[2] == INSCRIBED_INFLATED_OBSTACLE
+    for i in (3, 4, 5, 6):
+        assert cost[i] == math.floor(252 * math.exp(-k * (d[i] - r_ins)))
+    assert cost[7] == 0 and cost[8] == 0                  # beyond ceil(r_inf / res) cells
+
+
+def test_inflate_grid_around_a_lethal_cell():
+    grid = np.zeros((41, 41), dtype=np.uint8)
+    grid[20, 20] = LETHAL_OBSTACLE
+    out = inflate(grid, RES, 0.2, InflationLayerConfig(inflation_radius=0.5, cost_scaling_factor=5.0))
+    assert out[20, 20] == LETHAL_OBSTACLE
+    assert out[20, 24] == INSCRIBED_INFLATED_OBSTACLE     # 0.20 m away
+    assert out[20, 26] == math.floor(252 * math.exp(-5.0 * (0.3 - 0.2)))
+    assert out[20, 31] == 0                               # 0.55 m away
+    assert out[23, 24] == out[24, 23]                     # isotropic
+
+
+def planning_grid(costs):
+    h, w = costs.shape
+    return PlanningGrid(costs=costs, geometry=GridGeometry(RES, 0.0, 0.0, w, h), inscribed_radius=0.2)
+
+
+def test_plan_straight_line_on_free_grid():
+    plan = GlobalPlanner(PlannerConfig()).make_plan(planning_grid(np.zeros((20, 60), np.uint8)),
+                                                    Pose2D(0.1, 0.5, 0.0), Pose2D(2.8, 0.5, 0.0))
+    assert plan[0, :2] == pytest.approx([0.1, 0.5]) and plan[-1, :2] == pytest.approx([2.8, 0.5])
+    assert np.all(np.abs(plan[:, 1] - 0.5) < RES)
+    length = np.sum(np.hypot(np.diff(plan[:, 0]), np.diff(plan[:, 1])))
+    assert length == pytest.approx(2.7, abs=0.1)
+
+
+def test_plan_goes_around_a_wall():
+    costs = np.zeros((60, 60), np.uint8)
+    costs[0:45, 30] = LETHAL_OBSTACLE                      # wall with a gap at the top
+    costs = inflate(costs, RES, 0.1, InflationLayerConfig(inflation_radius=0.3, cost_scaling_factor=5.0))
+    plan = GlobalPlanner(PlannerConfig()).make_plan(planning_grid(costs), Pose2D(0.5, 0.5, 0), Pose2D(2.5, 0.5, 0))
+    rows = (plan[:, 1] / RES).astype(int).clip(0, 59)
+    cols = (plan[:, 0] / RES).astype(int).clip(0, 59)
+    assert np.all(costs[rows, cols] < INSCRIBED_INFLATED_OBSTACLE)
+    assert plan[:, 1].max() > 45 * RES                    # went over the wall's end
+
+
+def test_no_path_and_goal_in_obstacle_raise():
+    costs = np.zeros((20, 60), np.uint8)
+    costs[:, 30] = LETHAL_OBSTACLE                         # closed wall
+    planner = GlobalPlanner(PlannerConfig())
+    with pytest.raises(PlanningError):
+        planner.make_plan(planning_grid(costs), Pose2D(0.5, 0.5, 0), Pose2D(2.5, 0.5, 0))
+    with pytest.raises(PlanningError) as err:
+        planner.check_goal(planning_grid(costs), Pose2D(30 * RES + 0.01, 0.5, 0))
+    assert 'obstacle' in str(err.value)
+    with pytest.raises(PlanningError) as err:
+        planner.check_goal(planning_grid(costs), Pose2D(50.0, 0.5, 0))
+    assert 'off the global costmap' in str(err.value)
+
+
+def local_costmap():
+    cfg = CostmapConfig(global_frame='odom', rolling_window=True, width=4.0, height=4.0, robot_radius=0.2,
+                        static_layer=None, obstacle_layer=ObstacleLayerConfig(),
+                        inflation_layer=InflationLayerConfig(inflation_radius=0.5, cost_scaling_factor=5.0))
+    return LayeredCostmap(cfg, 'local_costmap')
+
+
+def test_dwa_drives_toward_the_plan_and_respects_limits():
+    cm = local_costmap()
+    cm.update(Pose2D(0, 0, 0), [], stamp=0.0)
+    dwa = DWAController(DWAConfig(max_vel_x=0.5, max_vel_trans=0.5, max_vel_y=0.0, min_vel_y=0.0, vy_samples=1,
+                                  acc_lim_x=1.0, acc_lim_theta=2.0, sim_time=1.0, vx_samples=6), 5.0)
+    plan = np.stack([np.linspace(0, 3, 61), np.zeros(61), np.zeros(61)], axis=1)
+    assert dwa.set_plan(plan)
+    res = dwa.compute_velocity(Pose2D(0, 0, 0), (0.3, 0.0), cm)
+    v, w = res.cmd
+    assert 0.3 < v <= 0.5 + 1e-9 and abs(w) < 0.5
+    assert v <= 0.3 + 1.0 * 0.2 + 1e-9                    # acceleration window of one 5 Hz period
+
+
+def test_dwa_avoids_an_obstacle_seen_by_the_laser():
+    cm = local_costmap()
+    layer = cm.cfg.obstacle_layer
+    ranges = np.full(640, 5.0)
+    fov = math.radians(58)
+    angles = -fov / 2 + np.arange(640) * fov / 639
+    ranges[np.abs(angles) < 0.15] = 0.8                   # a person 0.8 m straight ahead
+    obs = scan_to_observation(ranges, -fov / 2, fov / 639, 0.45, 5.0, Pose2D(0, 0, 0), 0.3, layer)
+    cm.update(Pose2D(0, 0, 0), [obs], stamp=0.0)
+    dwa = DWAController(DWAConfig(max_vel_x=0.5, max_vel_trans=0.5, max_vel_y=0.0, min_vel_y=0.0, vy_samples=1,
+                                  sim_time=1.7, vx_samples=6, occdist_scale=0.5), 5.0)
+    plan = np.stack([np.linspace(0, 3, 61), np.zeros(61), np.zeros(61)], axis=1)
+    dwa.set_plan(plan)
+    res = dwa.compute_velocity(Pose2D(0, 0, 0), (0.5, 0.0), cm)
+    if res.cmd is not None and res.trajectory.shape[0]:
+        xs, ys = res.trajectory[:, 0], res.trajectory[:, 1]
+        # the chosen trajectory never enters the obstacle's lethal/inscribed cells
+        costs = cm.cost_at(xs, ys)
+        assert np.all(costs < INSCRIBED_INFLATED_OBSTACLE)
+    else:
+        assert res.mode in ('failed', 'stop')
