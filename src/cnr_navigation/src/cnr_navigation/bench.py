@@ -1,0 +1,105 @@
+"""Navigation benchmark: global plan across the data-center hall and one control-loop cycle.
+
+    /usr/bin/python3 -m cnr_navigation.bench [--out bench_results/navigation.json]
+
+Uses the TurtleBot configuration (robot radius 0.20 m, inflation 0.5 m, k 5, 640-beam scans,
+DWA with 6 x 20 samples over 1.0 s). Prints one line per figure and writes JSON.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import statistics
+import time
+
+import numpy as np
+
+from cnr_navigation.core.costmap import (CostmapConfig, GridGeometry, InflationLayerConfig, LayeredCostmap,
+                                         ObstacleLayerConfig, StaticLayerConfig, scan_to_observation)
+from cnr_navigation.core.dwa import DWAConfig, DWAController
+from cnr_navigation.core.geometry import Pose2D
+from cnr_navigation.core.planner import GlobalPlanner, PlannerConfig, PlanningGrid
+
+WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
+INFLATION = InflationLayerConfig(inflation_radius=0.5, cost_scaling_factor=5.0)
+
+
+def hall_costmap() -> LayeredCostmap:
+    from cnr_sim.core.mapio import load_map
+    grid = load_map(os.path.join(WS, 'maps', 'datacenter.yaml'))
+    cfg = CostmapConfig(global_frame='map', robot_radius=0.20, static_layer=StaticLayerConfig(track_unknown_space=True),
+                        obstacle_layer=ObstacleLayerConfig(), inflation_layer=INFLATION)
+    cm = LayeredCostmap(cfg, 'global_costmap')
+    cm.set_map(grid.data, GridGeometry(grid.resolution, grid.origin[0], grid.origin[1], grid.width, grid.height))
+    return cm
+
+
+def plan_times(n: int) -> list:
+    cm = hall_costmap()
+    planner = GlobalPlanner(PlannerConfig(allow_unknown=False))
+    grid = PlanningGrid(cm.costs, cm.geometry, None, cm.cfg.inscribed_radius)
+    start, goal = Pose2D(1.0, 1.0, 0.0), Pose2D(19.0, 12.8, 0.0)     # opposite corners of the hall
+    times = []
+    for _ in range(n):
+        t0 = time.perf_counter()
+        plan = planner.make_plan(grid, start, goal)
+        times.append((time.perf_counter() - t0) * 1e3)
+    assert plan.shape[0] > 100
+    return times
+
+
+def control_times(n: int) -> list:
+    cfg = CostmapConfig(global_frame='odom', rolling_window=True, width=4.0, height=4.0, robot_radius=0.20,
+                        static_layer=None, obstacle_layer=ObstacleLayerConfig(min_obstacle_height=0.25,
+                                                                              max_obstacle_height=0.35),
+                        inflation_layer=INFLATION)
+    cm = LayeredCostmap(cfg, 'local_costmap')
+    dwa = DWAController(DWAConfig(max_vel_x=0.5, max_vel_trans=0.5, min_vel_y=0.0, max_vel_y=0.0, vy_samples=1,
+                                  vx_samples=6, vth_samples=20, sim_time=1.0, acc_lim_x=1.0, acc_lim_theta=2.0,
+                                  occdist_scale=0.5, path_distance_bias=64.0), 5.0)
+    dwa.set_plan(np.stack([np.linspace(0, 10, 201), 0.3 * np.sin(np.linspace(0, 3, 201)), np.zeros(201)], axis=1))
+    fov = math.radians(58.0)
+    rng = np.random.default_rng(0)
+    times = []
+    x = 0.0
+    for _ in range(n):
+        ranges = 2.0 + rng.uniform(0, 2.5, 640)              # a cluttered scene inside 4.5 m
+        t0 = time.perf_counter()
+        pose = Pose2D(x, 0.0, 0.0)
+        obs = scan_to_observation(ranges, -fov / 2, fov / 639, 0.45, 5.0, Pose2D(x - 0.087, 0.0, 0.0), 0.287,
+                                  cfg.obstacle_layer)
+        cm.update(pose, [obs], stamp=0.0)
+        dwa.compute_velocity(pose, (0.4, 0.0), cm)
+        times.append((time.perf_counter() - t0) * 1e3)
+        x += 0.08
+    return times
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('--out', default=os.path.join(WS, 'bench_results', 'navigation.json'))
+    ap.add_argument('--runs', type=int, default=20)
+    args = ap.parse_args()
+    results = []
+
+    def report(name, values, unit, target):
+        med = statistics.median(values)
+        results.append(dict(name=name, value=round(med, 3), unit=unit, target=target,
+                            max=round(max(values), 3), runs=len(values)))
+        print(f'{name:48s} {med:12.2f} {unit:10s} (median of {len(values)}, max {max(values):.2f}; '
+              f'target {target})', flush=True)
+
+    plan_times(1)
+    report('global plan across the data-center hall', plan_times(args.runs), 'ms', '<= 150')
+    control_times(3)
+    report('control loop (local costmap + DWA, 640 beams)', control_times(args.runs * 10), 'ms', '<= 10')
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    with open(args.out, 'w') as f:
+        json.dump(results, f, indent=1)
+    print(f'wrote {args.out}')
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,125 @@
+"""Simulator benchmark: core speed without ROS, time per laser scan, achieved real-time factor with ROS I/O.
+
+    /usr/bin/python3 -m cnr_sim.bench [--out bench_results/sim.json] [--sim-seconds 600]
+
+Prints one line per figure and writes them as JSON (name, value, unit, target).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+import xmlrpc.client
+
+import numpy as np
+
+from cnr_sim.core.kinematics import BaseLimits, Pose2D
+from cnr_sim.core.laser import LaserConfig
+from cnr_sim.core.mapio import load_map
+from cnr_sim.core.world import World, WorldConfig
+
+WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
+
+
+def core_rtf(map_yaml: str, start: Pose2D, sim_seconds: float) -> tuple:
+    """Real-time multiple of the world (50 Hz steps, 640-beam laser at 10 Hz, a driving robot)."""
+    world = World(load_map(map_yaml), BaseLimits(), LaserConfig(), WorldConfig(), start)
+    world.scan()                                     # compile / warm up
+    steps = int(sim_seconds / world.config.step)
+    rng = np.random.default_rng(1)
+    t0 = time.perf_counter()
+    scans = 0
+    for i in range(steps):
+        if i % 25 == 0:
+            world.command(float(rng.uniform(0.0, 0.5)), float(rng.uniform(-1.0, 1.0)))
+        world.step()
+        if world.scan_due():
+            world.scan()
+            scans += 1
+    wall = time.perf_counter() - t0
+    return sim_seconds / wall, steps / wall, scans
+
+
+def scan_time(map_yaml: str, start: Pose2D, n: int = 2000) -> float:
+    world = World(load_map(map_yaml), BaseLimits(), LaserConfig(), WorldConfig(), start)
+    world.scan()
+    t0 = time.perf_counter()
+    for _ in range(n):
+        world.scan()
+    return (time.perf_counter() - t0) / n * 1e3
+
+
+def ros_rtf(wall_seconds: float) -> float:
+    """Run the simulator node as fast as possible on a private master; /clock advance per wall second."""
+    import socket
+    with socket.socket() as s:
+        s.bind(('127.0.0.1', 0))
+        port = s.getsockname()[1]
+    env = dict(os.environ, ROS_MASTER_URI=f'http://127.0.0.1:{port}/', ROS_IP='127.0.0.1')
+    procs = [subprocess.Popen(['rosmaster', '--core', '-p', str(port)], env=env, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL, start_new_session=True)]
+    try:
+        master = xmlrpc.client.ServerProxy(env['ROS_MASTER_URI'])
+        for _ in range(100):
+            try:
+                master.getSystemState('/bench')
+                break
+            except OSError:
+                time.sleep(0.1)
+        master.setParam('/bench', '/use_sim_time', True)
+        procs.append(subprocess.Popen(
+            ['roslaunch', 'cnr_sim', 'simulator.launch', 'real_time_factor:=0'], env=env,
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True))
+        os.environ.update(env)
+        import rospy
+        from rosgraph_msgs.msg import Clock
+        rospy.init_node('sim_bench', anonymous=True, disable_signals=True)
+        latest = {'t': 0.0}
+        rospy.Subscriber('/clock', Clock, lambda m: latest.__setitem__('t', m.clock.to_sec()), queue_size=1)
+        deadline = time.monotonic() + 60
+        while latest['t'] < 1.0 and time.monotonic() < deadline:
+            time.sleep(0.05)
+        t_sim0, t_wall0 = latest['t'], time.monotonic()
+        time.sleep(wall_seconds)
+        return (latest['t'] - t_sim0) / (time.monotonic() - t_wall0)
+    finally:
+        import signal
+        for p in reversed(procs):
+            try:
+                os.killpg(p.pid, signal.SIGINT)
+                p.wait(15)
+            except (ProcessLookupError, subprocess.TimeoutExpired):
+                os.killpg(p.pid, signal.SIGKILL)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    ap.add_argument('--out', default=os.path.join(WS, 'bench_results', 'sim.json'))
+    ap.add_argument('--sim-seconds', type=float, default=600.0, help='simulated seconds per core run')
+    ap.add_argument('--ros-seconds', type=float, default=20.0, help='wall seconds of the ROS I/O run')
+    args = ap.parse_args()
+    results = []
+
+    def report(name, value, unit, target):
+        results.append(dict(name=name, value=round(value, 3), unit=unit, target=target))
+        print(f'{name:48s} {value:12.2f} {unit:10s} (target {target})', flush=True)
+
+    for label, yaml, start in (('corridor', 'corridor.yaml', Pose2D(0.5, 0.0, 0.0)),
+                               ('datacenter', 'datacenter.yaml', Pose2D(1.0, 1.0, 0.0))):
+        path = os.path.join(WS, 'maps', yaml)
+        rtf, steps, _ = core_rtf(path, start, args.sim_seconds)
+        report(f'sim core real-time multiple ({label})', rtf, 'x', '>= 1000')
+        report(f'sim core steps per second ({label})', steps, 'steps/s', '-')
+        report(f'time per 640-beam scan ({label})', scan_time(path, start), 'ms', '-')
+    report('sim with ROS I/O, as fast as possible', ros_rtf(args.ros_seconds), 'x real time', '>= 20')
+    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    with open(args.out, 'w') as f:
+        json.dump(results, f, indent=1)
+    print(f'wrote {args.out}')
+
+
+if __name__ == '__main__':
+    main()
