@@ -1,0 +1,68 @@
+#!/usr/bin/env bash
+# run_mission.sh — README command (1): the data-center monitoring mission (thesis §4.1, paper Appendix VI).
+#
+#   launch_scripts/run_mission.sh [--scenario corridor|datacenter|FILE.yaml] [--port P] [--rtf FACTOR]
+#                                 [--report-dir DIR]
+#
+# Sets up the workspace, starts a master (default port 11311, or --port, or ROS_MASTER_URI), brings up the
+# simulated TurtleBot with the monitoring modules (kestrel_driver, merger, local_mapcell_manager,
+# global_goal_manager, mfg) and prints progress until the hotspot is found (plus the scenario's extra
+# time). Writes a report folder (default reports/<scenario>-<date>): mapcells.png, measurements.tsv,
+# summary.json. Exit status 0 when the hotspot was found. Ctrl-C stops everything it started.
+#   --rtf 1 real time (default 5: five times faster than real time), 0 = as fast as possible.
+set -euo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+port=""; scenario="corridor"; rtf="5"; report=""
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --scenario) scenario="${2:?}"; shift 2 ;;
+    --port) port="${2:?}"; shift 2 ;;
+    --rtf) rtf="${2:?}"; shift 2 ;;
+    --report-dir) report="$(realpath -m "${2:?}")"; shift 2 ;;
+    -h|--help) sed -n '2,13p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    *) cnr_die "unknown argument '$1' (see --help)" ;;
+  esac
+done
+case "$scenario" in
+  *.yaml) scenario_file="$(realpath -m "$scenario")" ;;
+  *) scenario_file="$CNR_WS/config/scenarios/$scenario.yaml" ;;
+esac
+[ -f "$scenario_file" ] || cnr_die "scenario not found: $scenario_file (see config/scenarios/)"
+"$CNR_WS/launch_scripts/setup.sh"
+cnr_source_ws
+# map and start pose of the scenario (roslaunch cannot read them from YAML)
+read -r name map x y a < <(/usr/bin/python3 - "$scenario_file" "$CNR_WS/maps" <<'PY'
+import os, sys
+import cnr_params
+from cnr_params import Section
+try:
+    s = Section.from_file(sys.argv[1]).section('scenario')
+    name = s.string('name')
+    m = s.string('map')
+    m = m if os.path.isabs(m) else os.path.join(sys.argv[2], m)
+    if not os.path.isfile(m):
+        raise s.error('map', f'file not found: {m}')
+    x, y, a = s.vector('start', 3)
+    print(name, m, x, y, a)
+except cnr_params.ConfigError as exc:
+    print(f'run_mission.sh: {exc}', file=sys.stderr)
+    sys.exit(2)
+PY
+) || exit 2
+[ -n "$report" ] || report="$CNR_WS/reports/$name-$(date +%Y%m%d-%H%M%S)"
+mkdir -p "$report"
+cnr_master_uri "" "$port"
+cnr_master_up && cnr_die "a master already runs at $ROS_MASTER_URI; stop it or choose --port"
+cnr_ensure_master
+cnr_log "scenario $name ($scenario_file), real-time factor $rtf, report in $report"
+set +e
+roslaunch cnr_mission mission.launch scenario_file:="$scenario_file" map:="$map" x:="$x" y:="$y" a:="$a" \
+  real_time_factor:="$rtf" report_dir:="$report" store:="$report/store.tsv" 2>&1 \
+  | grep --line-buffered -v -e '^ \* /' -e '^\s*$' -e 'rosdep view is empty'
+set -e
+found=$(/usr/bin/python3 -c "import json,sys; print(json.load(open(sys.argv[1])).get('found'))" "$report/summary.json" 2>/dev/null || echo missing)
+case "$found" in
+  True) cnr_log "hotspot found; report: $report"; exit 0 ;;
+  False) cnr_log "no hotspot found; report: $report"; exit 3 ;;
+  *) cnr_log "the mission ended without a report (see ~/.ros/log/latest)"; exit 1 ;;
+esac

@@ -1,0 +1,144 @@
+"""The mission report: merged measurements as TSV, a JSON summary and a PNG of the mapcells (ROS-free).
+
+Files written into the report folder:
+
+* ``measurements.tsv`` — the merged measurements in the thesis's tab-separated format
+  (measurement, time, x, y, temperature, cell, row, col, pose_time);
+* ``summary.json`` — scenario, hotspot, sim time to find it, distance driven, battery used, counts;
+* ``mapcells.png`` — the map with every mapcell coloured by its average temperature, the robot's path and
+  the hotspot marked.
+"""
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+TSV_HEADER = ['measurement', 'time', 'x', 'y', 'temperature', 'cell', 'row', 'col', 'pose_time']
+
+
+@dataclass
+class CellSummary:
+    index: int
+    row: int
+    col: int
+    min_x: float
+    max_x: float
+    min_y: float
+    max_y: float
+    mean: float
+    count: int
+
+
+@dataclass
+class Record:
+    number: int
+    time: float
+    x: float
+    y: float
+    temperature: float
+    cell: int
+    row: int
+    col: int
+    pose_time: float
+
+
+def path_length(points: Sequence[Tuple[float, float]]) -> float:
+    """Length of a polyline [m]."""
+    if len(points) < 2:
+        return 0.0
+    p = np.asarray(points, dtype=float)
+    return float(np.sum(np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))))
+
+
+def write_tsv(path: str, records: Sequence[Record]) -> None:
+    with open(path, 'w') as f:
+        f.write('\t'.join(TSV_HEADER) + '\n')
+        for r in records:
+            f.write(f'{r.number}\t{r.time:.6f}\t{r.x:.4f}\t{r.y:.4f}\t{r.temperature:.4f}\t{r.cell}\t{r.row}\t'
+                    f'{r.col}\t{r.pose_time:.6f}\n')
+
+
+def read_tsv(path: str) -> List[Record]:
+    out = []
+    with open(path) as f:
+        header = f.readline().rstrip('\n').split('\t')
+        if header != TSV_HEADER:
+            raise ValueError(f'{path}: unexpected header {header}')
+        for line in f:
+            p = line.rstrip('\n').split('\t')
+            out.append(Record(int(p[0]), float(p[1]), float(p[2]), float(p[3]), float(p[4]), int(p[5]), int(p[6]),
+                              int(p[7]), float(p[8])))
+    return out
+
+
+def write_summary(path: str, summary: Dict) -> None:
+    def clean(v):
+        if isinstance(v, float) and not math.isfinite(v):
+            return None
+        if isinstance(v, dict):
+            return {k: clean(x) for k, x in v.items()}
+        if isinstance(v, list):
+            return [clean(x) for x in v]
+        return v
+    tmp = path + '.tmp'
+    with open(tmp, 'w') as f:
+        json.dump(clean(summary), f, indent=2)
+    os.replace(tmp, path)
+
+
+def render_png(path: str, cells: Sequence[CellSummary], trajectory: Sequence[Tuple[float, float]],
+               hotspot: Optional[int], title: str, occupancy: Optional[np.ndarray] = None,
+               map_extent: Optional[Tuple[float, float, float, float]] = None,
+               sources: Sequence[Tuple[str, float, float]] = ()) -> None:
+    """Mapcells coloured by mean temperature over the map, with the path and the hotspot."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Rectangle
+
+    x0 = min(c.min_x for c in cells)
+    x1 = max(c.max_x for c in cells)
+    y0 = min(c.min_y for c in cells)
+    y1 = max(c.max_y for c in cells)
+    w, h = x1 - x0, y1 - y0
+    fig, ax = plt.subplots(figsize=(min(14, max(6, w * 0.9)), min(10, max(3.5, h * 0.9 + 1.5))))
+    if occupancy is not None and map_extent is not None:
+        shade = np.where(occupancy < 0, 0.8, np.where(occupancy >= 50, 0.15, 1.0))
+        ax.imshow(shade, cmap='gray', vmin=0, vmax=1, origin='lower', extent=map_extent, interpolation='nearest')
+    means = [c.mean for c in cells if math.isfinite(c.mean)]
+    norm = matplotlib.colors.Normalize(vmin=min(means) if means else 0, vmax=max(means) if means else 1)
+    cmap = matplotlib.cm.get_cmap('inferno')
+    for c in cells:
+        face = cmap(norm(c.mean)) if math.isfinite(c.mean) else (0, 0, 0, 0)
+        ax.add_patch(Rectangle((c.min_x, c.min_y), c.max_x - c.min_x, c.max_y - c.min_y, facecolor=face,
+                               edgecolor='steelblue', linewidth=0.6, alpha=0.75))
+        if math.isfinite(c.mean) and w <= 24:
+            ax.text((c.min_x + c.max_x) / 2, (c.min_y + c.max_y) / 2, f'{c.mean:.1f}', ha='center', va='center',
+                    fontsize=7, color='white' if norm(c.mean) < 0.6 else 'black')
+    if trajectory:
+        t = np.asarray(trajectory)
+        ax.plot(t[:, 0], t[:, 1], color='deepskyblue', linewidth=1.2, label='robot path')
+        ax.plot(t[0, 0], t[0, 1], 'o', color='deepskyblue', markersize=6)
+    for name, sx, sy in sources:
+        ax.plot(sx, sy, 'x', color='red', markersize=7)
+    if hotspot is not None:
+        c = next(c for c in cells if c.index == hotspot)
+        ax.add_patch(Rectangle((c.min_x, c.min_y), c.max_x - c.min_x, c.max_y - c.min_y, fill=False,
+                               edgecolor='lime', linewidth=2.5, label=f'hotspot (cell {hotspot})'))
+    sm = matplotlib.cm.ScalarMappable(norm=norm, cmap=cmap)
+    fig.colorbar(sm, ax=ax, label='cell average temperature [degC]', shrink=0.8)
+    ax.set_xlim(x0 - 1.0, x1 + 1.0)
+    ax.set_ylim(y0 - 1.0, y1 + 1.0)
+    ax.set_aspect('equal')
+    ax.set_xlabel('x [m]')
+    ax.set_ylabel('y [m]')
+    ax.set_title(title)
+    ax.legend(loc='upper left', fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)

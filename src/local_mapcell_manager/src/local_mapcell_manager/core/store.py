@@ -1,0 +1,145 @@
+"""Per-cell monitoring state and the append-only measurement store (ROS-free).
+
+The store is a TSV file, one merged measurement per line, flushed and fsync'ed per line, in the
+thesis's tab-separated format (measurement number, time, position, temperature, cell):
+
+    measurement  time  x  y  temperature  cell  row  col  pose_time
+
+On start the file is read back to rebuild every cell's state, so a restart loses nothing. A
+truncated last line (a crash while writing) is skipped with a warning and never truncated further:
+new lines start on a fresh line.
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass, field
+from typing import Callable, List, Optional, Tuple
+
+from local_mapcell_manager.core.grid import MapcellGrid
+
+HEADER = ['measurement', 'time', 'x', 'y', 'temperature', 'cell', 'row', 'col', 'pose_time']
+
+
+@dataclass
+class Measurement:
+    number: int
+    time: float
+    x: float
+    y: float
+    temperature: float
+    cell: int
+    pose_time: float
+
+
+@dataclass
+class CellState:
+    """Running statistics (Welford) and the visit record of one cell."""
+
+    last_visit: float = 0.0          # stamp of the latest measurement in the cell (timestamp method)
+    visit_count: int = 0             # entries into the cell
+    n: int = 0
+    mean: float = math.nan
+    m2: float = 0.0
+    min: float = math.nan
+    max: float = math.nan
+    measurements: List[Measurement] = field(default_factory=list)
+
+    def add(self, m: Measurement) -> None:
+        self.measurements.append(m)
+        self.n += 1
+        if self.n == 1:
+            self.mean, self.m2, self.min, self.max = m.temperature, 0.0, m.temperature, m.temperature
+        else:
+            delta = m.temperature - self.mean
+            self.mean += delta / self.n
+            self.m2 += delta * (m.temperature - self.mean)
+            self.min, self.max = min(self.min, m.temperature), max(self.max, m.temperature)
+        self.last_visit = max(self.last_visit, m.time)
+
+    @property
+    def std(self) -> float:
+        return math.sqrt(self.m2 / (self.n - 1)) if self.n > 1 else math.nan
+
+
+class CellBook:
+    """All cells' states; counts a visit each time consecutive measurements enter a different cell."""
+
+    def __init__(self, grid: MapcellGrid) -> None:
+        self.grid = grid
+        self.states = [CellState() for _ in range(len(grid))]
+        self.current: Optional[int] = None
+        self.count = 0
+
+    def add(self, m: Measurement) -> None:
+        if m.cell != self.current:
+            self.states[m.cell].visit_count += 1
+            self.current = m.cell
+        self.states[m.cell].add(m)
+        self.count = max(self.count, m.number)
+
+    def measurements(self, cell: Optional[int] = None) -> List[Measurement]:
+        if cell is not None:
+            return list(self.states[cell].measurements)
+        return sorted((m for s in self.states for m in s.measurements), key=lambda m: m.number)
+
+
+class MeasurementStore:
+    """Append-only TSV file of measurements.
+
+    Args:
+        path: the file (created with a header if missing; directories too).
+        warn: callback for problems met while reading it back.
+    """
+
+    def __init__(self, path: str, warn: Callable[[str], None] = lambda s: None) -> None:
+        self.path = path
+        self.warn = warn
+        os.makedirs(os.path.dirname(os.path.abspath(path)) or '.', exist_ok=True)
+        self._needs_newline = False
+        if not os.path.exists(path) or os.path.getsize(path) == 0:
+            with open(path, 'w') as f:
+                f.write('\t'.join(HEADER) + '\n')
+                f.flush()
+                os.fsync(f.fileno())
+        else:
+            with open(path, 'rb') as f:
+                f.seek(-1, os.SEEK_END)
+                self._needs_newline = f.read(1) != b'\n'
+
+    def load(self, grid: MapcellGrid) -> List[Measurement]:
+        """Every complete, valid line of the file (in file order)."""
+        out = []
+        with open(self.path, 'r', errors='replace') as f:
+            lines = f.read().split('\n')
+        complete = lines[:-1]            # the text after the last newline is an unfinished line
+        if lines[-1]:
+            self.warn(f'{self.path}: ignoring an incomplete last line (interrupted write): {lines[-1][:60]!r}')
+        for no, line in enumerate(complete, 1):
+            if not line or line.startswith('measurement'):
+                continue
+            parts = line.split('\t')
+            try:
+                if len(parts) != len(HEADER):
+                    raise ValueError(f'{len(parts)} fields')
+                m = Measurement(int(parts[0]), float(parts[1]), float(parts[2]), float(parts[3]), float(parts[4]),
+                                int(parts[5]), float(parts[8]))
+                if not 0 <= m.cell < len(grid):
+                    raise ValueError(f'cell {m.cell} outside the grid')
+            except ValueError as exc:
+                self.warn(f'{self.path}:{no}: ignoring a malformed line ({exc})')
+                continue
+            out.append(m)
+        return out
+
+    def append(self, m: Measurement, grid: MapcellGrid) -> None:
+        row, col = divmod(m.cell, grid.cols)
+        line = '\t'.join([str(m.number), f'{m.time:.6f}', f'{m.x:.4f}', f'{m.y:.4f}', f'{m.temperature:.4f}',
+                          str(m.cell), str(row), str(col), f'{m.pose_time:.6f}']) + '\n'
+        with open(self.path, 'a') as f:
+            if self._needs_newline:
+                f.write('\n')
+                self._needs_newline = False
+            f.write(line)
+            f.flush()
+            os.fsync(f.fileno())

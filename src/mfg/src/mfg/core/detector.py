@@ -1,0 +1,57 @@
+"""Abnormal temperature detection (ROS-free).
+
+``ambient`` mode: a value is abnormal when it exceeds ``ambient + delta``. ``statistics`` mode: when it is
+``z`` standard deviations above the running mean of every measurement so far (after ``min_samples``) and at
+least ``delta`` above it — the cell statistics the local mapcell manager keeps.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from cnr_params import ConfigError, Section
+
+MODES = ('ambient', 'statistics')
+
+
+@dataclass
+class DetectorConfig:
+    mode: str = 'ambient'
+    ambient: float = 22.0
+    delta: float = 2.0
+    z: float = 3.0
+    min_samples: int = 20
+
+    @classmethod
+    def from_section(cls, sec: Section) -> 'DetectorConfig':
+        cfg = cls(mode=sec.string('mode', 'ambient', choices=MODES), ambient=sec.number('ambient', 22.0),
+                  delta=sec.number('delta', 2.0, positive=True), z=sec.number('z', 3.0, positive=True),
+                  min_samples=sec.integer('min_samples', 20, minimum=2))
+        return cfg
+
+
+class Detector:
+    def __init__(self, cfg: DetectorConfig) -> None:
+        for name in ('ambient', 'delta', 'z'):
+            if not math.isfinite(getattr(cfg, name)):
+                raise ConfigError('mfg', f'threshold.{name}', 'must be finite')
+        self.cfg = cfg
+        self.n = 0
+        self.mean = 0.0
+        self.m2 = 0.0
+
+    def observe(self, temperature: float) -> bool:
+        """Feed one measurement; True if it is abnormal (judged before it joins the statistics)."""
+        c = self.cfg
+        if c.mode == 'ambient':
+            abnormal = temperature > c.ambient + c.delta
+        else:
+            std = math.sqrt(self.m2 / (self.n - 1)) if self.n > 1 else math.inf
+            abnormal = (self.n >= c.min_samples and temperature > self.mean + c.delta
+                        and temperature > self.mean + c.z * std)
+        if not abnormal:                       # abnormal values do not raise the baseline
+            self.n += 1
+            d = temperature - self.mean
+            self.mean += d / self.n
+            self.m2 += d * (temperature - self.mean)
+        return abnormal

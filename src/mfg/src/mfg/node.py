@@ -1,0 +1,282 @@
+"""``mfg`` (measurement feedback goal): patrol the global goals, and locate a hotspot when a value is abnormal.
+
+Drives through ``move_base`` (actionlib); asks ``global_goal_manager/next_goal`` for global goals; watches
+``merged_measurements``; publishes ``hotspot`` and ``~state``. See the package README.
+"""
+from __future__ import annotations
+
+import math
+import threading
+from collections import deque
+from dataclasses import dataclass
+from typing import Deque, List, Optional, Tuple
+
+import actionlib
+import rospy
+from actionlib_msgs.msg import GoalStatus
+from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
+from nav_msgs.msg import Odometry
+
+import cnr_params
+from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, SearchState
+from cnr_msgs.srv import NextGoal
+from cnr_params import Section
+from cnr_params.ros import private_section
+from mfg.core.detector import Detector, DetectorConfig
+from mfg.core.search import HotspotSearch
+
+
+@dataclass
+class MfgParams:
+    detector: DetectorConfig
+    neighbourhood: int
+    settle_time: float
+    min_measurements: int
+    measure_timeout: float
+    goal_timeout: float
+    next_goal_service: str
+    pose_topic: str
+    suppress_radius: int
+    frame_id: str
+
+
+def read_params(p: Section) -> MfgParams:
+    m = p.section('mfg', {})
+    return MfgParams(detector=DetectorConfig.from_section(m.section('threshold', {})),
+                     neighbourhood=_connectivity(m),
+                     settle_time=m.number('settle_time', 6.0, nonnegative=True),
+                     min_measurements=m.integer('min_measurements', 6, minimum=1),
+                     measure_timeout=m.number('measure_timeout', 20.0, positive=True),
+                     goal_timeout=m.number('goal_timeout', 120.0, positive=True),
+                     next_goal_service=m.string('next_goal_service', 'global_goal_manager/next_goal'),
+                     pose_topic=m.string('pose_topic', 'base_pose_ground_truth'),
+                     suppress_radius=m.integer('suppress_radius', 2, minimum=0),
+                     frame_id=m.string('frame_id', 'map'))
+
+
+def _connectivity(m: Section) -> int:
+    value = m.integer('neighbourhood', 8)
+    if value not in (4, 8):
+        raise m.error('neighbourhood', f'must be 4 or 8, got {value}')
+    return value
+
+
+class Grid:
+    """The mapcell grid as learnt from ``cell_states`` (geometry only)."""
+
+    def __init__(self, msg: CellStates) -> None:
+        self.rows, self.cols = msg.rows, msg.cols
+        self.cells = list(msg.cells)
+
+    def index_of(self, x: float, y: float) -> Optional[int]:
+        for c in self.cells:
+            if c.min_x < x <= c.max_x and c.min_y < y <= c.max_y:
+                return c.index
+        return None
+
+    def neighbours(self, index: int, connectivity: int) -> List[int]:
+        row, col = divmod(index, self.cols)
+        steps = [(-1, 0), (1, 0), (0, -1), (0, 1)] + ([(-1, -1), (-1, 1), (1, -1), (1, 1)] if connectivity == 8 else [])
+        return [(row + dr) * self.cols + col + dc for dr, dc in steps
+                if 0 <= row + dr < self.rows and 0 <= col + dc < self.cols]
+
+
+class MfgNode:
+    def __init__(self, p: MfgParams) -> None:
+        self.p = p
+        self.detector = Detector(p.detector)
+        self.lock = threading.Lock()
+        self.grid: Optional[Grid] = None
+        self.pose: Optional[Tuple[float, float]] = None
+        self.measurements: Deque[Tuple[float, int, float]] = deque(maxlen=5000)   # (t, cell, temperature)
+        self.trigger: Optional[Tuple[float, int, float]] = None
+        self.cell_trail: List[int] = []       # distinct cells in visiting order
+        self.hotspots: List[int] = []
+        self.state = SearchState(mode='IDLE', goal_cell=-1, investigation_cell=-1, investigation_mean=math.nan,
+                                 last_temperature=math.nan, last_cell=-1)
+        self.client = actionlib.SimpleActionClient('move_base', MoveBaseAction)
+        self.state_pub = rospy.Publisher('~state', SearchState, queue_size=10, latch=True)
+        self.hotspot_pub = rospy.Publisher('hotspot', Hotspot, queue_size=1, latch=True)
+        rospy.Subscriber('cell_states', CellStates, self._on_cells, queue_size=1)
+        rospy.Subscriber(p.pose_topic, Odometry, self._on_pose, queue_size=1)
+        rospy.Subscriber('merged_measurements', MergedMeasurement, self._on_measurement, queue_size=100)
+
+    # -- inputs --------------------------------------------------------------------------------
+    def _on_cells(self, msg: CellStates) -> None:
+        if self.grid is None and msg.cells:
+            self.grid = Grid(msg)
+
+    def _on_pose(self, msg: Odometry) -> None:
+        self.pose = (msg.pose.pose.position.x, msg.pose.pose.position.y)
+
+    def _on_measurement(self, msg: MergedMeasurement) -> None:
+        if self.grid is None or not all(math.isfinite(v) for v in (msg.x, msg.y, msg.temperature)):
+            return
+        cell = self.grid.index_of(msg.x, msg.y)
+        t = msg.header.stamp.to_sec()
+        with self.lock:
+            self.state.last_temperature, self.state.last_cell = msg.temperature, -1 if cell is None else cell
+            if cell is None:
+                return
+            self.measurements.append((t, cell, msg.temperature))
+            if not self.cell_trail or self.cell_trail[-1] != cell:
+                self.cell_trail.append(cell)
+            abnormal = self.detector.observe(msg.temperature)
+            suppressed = any(self._cell_distance(cell, h) <= self.p.suppress_radius for h in self.hotspots)
+            if abnormal and not suppressed and self.trigger is None and self.state.mode == 'PATROL':
+                self.trigger = (t, cell, msg.temperature)
+
+    # -- helpers -------------------------------------------------------------------------------
+    def publish_state(self, mode: str, message: str, search: Optional[HotspotSearch] = None,
+                      goal_cell: int = -1) -> None:
+        with self.lock:
+            s = self.state
+            s.header.stamp = rospy.Time.now()
+            s.mode, s.message, s.goal_cell = mode, message, goal_cell
+            if search is not None:
+                s.investigation_cell, s.investigation_mean = search.ic, search.ic_mean
+                s.checked, s.unchecked = list(search.checked), list(search.unchecked)
+            elif mode == 'PATROL':
+                s.investigation_cell, s.investigation_mean, s.checked, s.unchecked = -1, math.nan, [], []
+            self.state_pub.publish(s)
+        rospy.loginfo(message)
+
+    def drive(self, x: float, y: float, interruptible: bool) -> str:
+        """Drive to (x, y); returns 'succeeded', 'failed' or 'interrupted' (abnormal value while patrolling)."""
+        goal = MoveBaseGoal()
+        goal.target_pose.header.frame_id = self.p.frame_id
+        goal.target_pose.header.stamp = rospy.Time.now()
+        goal.target_pose.pose.position.x, goal.target_pose.pose.position.y = x, y
+        if self.pose is not None:
+            yaw = math.atan2(y - self.pose[1], x - self.pose[0])
+            goal.target_pose.pose.orientation.z, goal.target_pose.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+        else:
+            goal.target_pose.pose.orientation.w = 1.0
+        self.client.send_goal(goal)
+        deadline = rospy.Time.now().to_sec() + self.p.goal_timeout
+        while not rospy.is_shutdown():
+            if self.client.wait_for_result(rospy.Duration(0.1)):
+                return 'succeeded' if self.client.get_state() == GoalStatus.SUCCEEDED else 'failed'
+            if interruptible and self.trigger is not None:
+                self.client.cancel_goal()
+                return 'interrupted'
+            if rospy.Time.now().to_sec() > deadline:
+                self.client.cancel_goal()
+                return 'failed'
+        return 'failed'
+
+    def measure(self, cell: int) -> float:
+        """Average temperature in ``cell`` after settling: NaN if nothing could be measured."""
+        start = rospy.Time.now().to_sec()
+        t_from = start + self.p.settle_time
+        deadline = t_from + self.p.measure_timeout
+        while not rospy.is_shutdown():
+            with self.lock:
+                values = [v for t, c, v in self.measurements if c == cell and t >= t_from]
+            if len(values) >= self.p.min_measurements:
+                return sum(values) / len(values)
+            if rospy.Time.now().to_sec() > deadline:
+                return sum(values) / len(values) if values else math.nan
+            rospy.sleep(0.1)
+        return math.nan
+
+    def _cell_distance(self, a: int, b: int) -> int:
+        """Chebyshev distance between two cells [cells]."""
+        ra, ca = divmod(a, self.grid.cols)
+        rb, cb = divmod(b, self.grid.cols)
+        return max(abs(ra - rb), abs(ca - cb))
+
+    def cell_centre(self, index: int) -> Tuple[float, float]:
+        c = self.grid.cells[index]
+        return c.center_x, c.center_y
+
+    # -- behaviours ----------------------------------------------------------------------------
+    def patrol_once(self) -> None:
+        rospy.wait_for_service(self.p.next_goal_service)
+        x, y = self.pose if self.pose else (0.0, 0.0)
+        try:
+            res = rospy.ServiceProxy(self.p.next_goal_service, NextGoal)(x, y)
+        except rospy.ServiceException as exc:
+            rospy.logwarn_throttle(10.0, f'global goal manager unavailable: {exc}')
+            rospy.sleep(1.0)
+            return
+        if not res.success:
+            rospy.logwarn_throttle(10.0, f'no global goal: {res.message}')
+            rospy.sleep(1.0)
+            return
+        cell = res.cell
+        self.publish_state('PATROL', f'global goal: cell {cell.index} (col {cell.col}, row {cell.row}) at '
+                                     f'({cell.center_x:.1f}, {cell.center_y:.1f}) [{res.policy}]', goal_cell=cell.index)
+        outcome = self.drive(cell.center_x, cell.center_y, interruptible=True)
+        if outcome == 'failed':
+            rospy.logwarn(f'global goal cell {cell.index} not reached')
+
+    def search(self) -> None:
+        t0, cell, temp = self.trigger
+        with self.lock:
+            trail = list(self.cell_trail)
+        previous = next((c for c in reversed(trail[:-1]) if c != cell), None)
+        self.publish_state('SEARCH', f'abnormal temperature {temp:.2f} degC in cell {cell}: locating the hotspot')
+        conn = self.p.neighbourhood
+        cx, cy = self.cell_centre(cell)
+        self.drive(cx, cy, interruptible=False)
+        ic_mean = self.measure(cell)
+        if math.isnan(ic_mean):
+            ic_mean = temp
+        known = {}
+        if previous is not None:
+            with self.lock:
+                prev_values = [v for t, c, v in self.measurements if c == previous]
+            if prev_values:
+                known[previous] = sum(prev_values[-self.p.min_measurements:]) / len(prev_values[-self.p.min_measurements:])
+        s = HotspotSearch(lambda i: self.grid.neighbours(i, conn), cell, ic_mean, previous, known)
+        self.publish_state('SEARCH', f'investigation cell {s.ic} ({s.ic_mean:.2f} degC); unchecked {s.unchecked}',
+                           search=s)
+        while not s.done and not rospy.is_shutdown():
+            px, py = self.pose if self.pose else (cx, cy)
+            target = s.next_target(lambda i: math.hypot(self.cell_centre(i)[0] - px, self.cell_centre(i)[1] - py))
+            tx, ty = self.cell_centre(target)
+            self.publish_state('SEARCH', f'checking cell {target} for IC {s.ic}', search=s, goal_cell=target)
+            if self.drive(tx, ty, interruptible=False) != 'succeeded':
+                s.unreachable(target)
+                self.publish_state('SEARCH', f'cell {target} unreachable: marked checked', search=s)
+                continue
+            step = s.report(target, self.measure(target))
+            self.publish_state('SEARCH', f'cell {target}: {step.mean:.2f} degC ({step.outcome}); IC {s.ic} '
+                                         f'{s.ic_mean:.2f} degC; unchecked {s.unchecked}', search=s)
+        hot = self.grid.cells[s.ic]
+        msg = Hotspot(cell_index=s.ic, row=hot.row, col=hot.col, x=hot.center_x, y=hot.center_y,
+                      temperature=s.ic_mean, search_duration=rospy.Time.now().to_sec() - t0,
+                      cells_checked=sum(1 for h in s.history if h.outcome != 'hotter') + len(s.ic_history) - 1)
+        msg.header.stamp = rospy.Time.now()
+        msg.header.frame_id = self.p.frame_id
+        self.hotspot_pub.publish(msg)
+        self.hotspots.append(s.ic)
+        self.publish_state('DONE', f'HOTSPOT in cell {s.ic} (col {hot.col}, row {hot.row}) at '
+                                   f'({hot.center_x:.1f}, {hot.center_y:.1f}): {s.ic_mean:.2f} degC after '
+                                   f'{msg.search_duration:.0f} s; back to the global goals', search=s)
+        with self.lock:
+            self.trigger = None        # values around a known hotspot no longer trigger a search
+
+    def run(self) -> None:
+        while not rospy.is_shutdown() and (self.grid is None or self.pose is None):
+            rospy.sleep(0.2)
+        rospy.loginfo('waiting for move_base')
+        while not rospy.is_shutdown() and not self.client.wait_for_server(rospy.Duration(1.0)):
+            pass
+        self.publish_state('PATROL', 'patrolling the global goals')
+        while not rospy.is_shutdown():
+            if self.trigger is not None:
+                self.search()
+            else:
+                self.patrol_once()
+
+
+@cnr_params.exit_on_config_error
+def main() -> None:
+    rospy.init_node('mfg')
+    node = MfgNode(read_params(private_section('~')))
+    try:
+        node.run()
+    except rospy.ROSInterruptException:
+        pass
