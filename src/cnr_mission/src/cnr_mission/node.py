@@ -140,7 +140,6 @@ class MissionMonitor:
             battery_energy=None if b1 is None else b1.serial_number,
             measurements_taken=len(records) or self.measurements,
             heat_sources=[dict(name=n, x=x, y=y) for n, x, y in self.sources])
-        write_summary(os.path.join(self.report_dir, 'summary.json'), summary)
         if cells:
             occ = extent = None
             if self.map_file:
@@ -155,6 +154,8 @@ class MissionMonitor:
                                         if h else 'no hotspot found')
             render_png(os.path.join(self.report_dir, 'mapcells.png'), cells, traj, h.cell_index if h else None,
                        title, occ, extent, self.sources)
+        # written last (atomically): its presence means the report is complete
+        write_summary(os.path.join(self.report_dir, 'summary.json'), summary)
         return self.report_dir
 
 
