@@ -30,7 +30,7 @@ PKGS=(
   python3-std-msgs python3-geometry-msgs python3-sensor-msgs python3-nav-msgs python3-std-srvs
   python3-move-base-msgs python3-actionlib-msgs python3-tf2-msgs python3-rosgraph-msgs
   python3-numpy python3-numba python3-scipy python3-skimage python3-yaml python3-psutil python3-pil
-  python3-matplotlib python3-pytest python3-pytest-timeout python3-serial python3-pyroute2 python3-sklearn iproute2 iperf3
+  python3-matplotlib python3-pytest python3-pytest-timeout python3-serial python3-pyroute2 python3-sklearn iproute2 iputils-ping iperf3
 )
 
 if [ "$install" = 1 ]; then

@@ -1,0 +1,73 @@
+"""Network namespaces and TUN devices (Linux, root): the few system calls the testbed needs."""
+from __future__ import annotations
+
+import ctypes
+import fcntl
+import os
+import struct
+import subprocess
+from typing import List
+
+CLONE_NEWNET = 0x40000000
+TUNSETIFF = 0x400454CA
+IFF_TUN = 0x0001
+IFF_NO_PI = 0x1000
+NETNS_DIR = '/var/run/netns'
+
+_libc = ctypes.CDLL(None, use_errno=True)
+
+
+def _setns(fd: int) -> None:
+    if _libc.setns(fd, CLONE_NEWNET) != 0:
+        err = ctypes.get_errno()
+        raise OSError(err, f'setns: {os.strerror(err)}')
+
+
+def ip(*args: str, check: bool = True) -> subprocess.CompletedProcess:
+    """Run ``ip`` (iproute2); raises RuntimeError with its message on failure."""
+    r = subprocess.run(['ip', *args], capture_output=True, text=True)
+    if check and r.returncode != 0:
+        raise RuntimeError(f"ip {' '.join(args)}: {r.stderr.strip() or r.stdout.strip()}")
+    return r
+
+
+def namespaces() -> List[str]:
+    try:
+        return sorted(os.listdir(NETNS_DIR))
+    except FileNotFoundError:
+        return []
+
+
+def add_namespace(name: str) -> None:
+    ip('netns', 'add', name)
+    ip('-n', name, 'link', 'set', 'lo', 'up')
+
+
+def delete_namespace(name: str) -> None:
+    if name in namespaces():
+        ip('netns', 'delete', name, check=False)
+
+
+def open_tun(namespace: str, device: str) -> int:
+    """Create a TUN device (IFF_TUN | IFF_NO_PI) inside ``namespace``; returns its fd (non-blocking).
+
+    The device lives as long as the fd: it vanishes when the owning process exits, however it exits.
+    """
+    own = os.open('/proc/self/ns/net', os.O_RDONLY)
+    target = os.open(os.path.join(NETNS_DIR, namespace), os.O_RDONLY)
+    try:
+        _setns(target)
+        try:
+            fd = os.open('/dev/net/tun', os.O_RDWR | os.O_NONBLOCK)
+            fcntl.ioctl(fd, TUNSETIFF, struct.pack('16sH', device.encode(), IFF_TUN | IFF_NO_PI))
+        finally:
+            _setns(own)
+    finally:
+        os.close(own)
+        os.close(target)
+    return fd
+
+
+def configure(namespace: str, device: str, address: str, peer: str, prefix: int, mtu: int) -> None:
+    ip('-n', namespace, 'addr', 'add', f'{address}/32', 'peer', f'{peer}/32', 'dev', device)
+    ip('-n', namespace, 'link', 'set', device, 'mtu', str(mtu), 'up')

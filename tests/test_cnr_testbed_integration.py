@@ -1,0 +1,68 @@
+"""The testbed as root: namespaces joined by the emulator, live changes, outage, nothing left behind."""
+import os
+import re
+import signal
+import subprocess
+import time
+
+import pytest
+
+from rosharness import wait_for
+
+pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason='needs root (network namespaces and TUN devices)')
+
+NAME = f'tbt{os.getpid() % 10000}'
+
+
+def script(workspace, *args):
+    return subprocess.run([f'{workspace}/launch_scripts/testbed.sh', '--name', NAME, *args], capture_output=True,
+                          text=True, timeout=60)
+
+
+def ping_rtt(count=5):
+    r = subprocess.run(['ip', 'netns', 'exec', f'{NAME}-robot', 'ping', '-c', str(count), '-i', '0.2', '-W', '2',
+                        '10.77.0.2'], capture_output=True, text=True, timeout=60)
+    m = re.search(r'= [\d.]+/([\d.]+)/', r.stdout)
+    return float(m.group(1)) if m else None
+
+
+def leftovers():
+    ns = subprocess.run(['ip', 'netns'], capture_output=True, text=True).stdout
+    procs = subprocess.run(['pgrep', '-af', 'cnr_testbed.emulator'], capture_output=True, text=True).stdout
+    return [l for l in ns.splitlines() + procs.splitlines() if NAME in l]
+
+
+@pytest.fixture
+def testbed(workspace):
+    r = script(workspace, 'up')
+    assert r.returncode == 0, r.stderr
+    yield
+    script(workspace, 'down')
+    assert not leftovers()
+
+
+def test_delay_live_change_and_outage(testbed, workspace):
+    base = ping_rtt()
+    assert base is not None and base < 20
+    assert script(workspace, 'set', '--delay', '25').returncode == 0
+    assert 48 < ping_rtt() < 60                    # 2 x 25 ms (a loose bound, not a timing target)
+    assert script(workspace, 'set', '--outage', 'on').returncode == 0
+    assert ping_rtt(3) is None
+    assert script(workspace, 'set', '--outage', 'off', '--delay', '0').returncode == 0
+    assert ping_rtt() is not None
+    status = script(workspace, 'status').stdout
+    assert 'lost' in status and NAME in status
+    r = script(workspace, 'set', '--delay', '-4')
+    assert r.returncode != 0
+
+
+def test_down_leaves_nothing_and_sigkill_is_cleaned_up(workspace):
+    assert script(workspace, 'up').returncode == 0
+    sup = int(open(f'/run/cnr_testbed/{NAME}.pid').read())
+    child = int(subprocess.run(['pgrep', '-P', str(sup)], capture_output=True, text=True).stdout.split()[0])
+    os.kill(child, signal.SIGKILL)                 # a crash of the emulator
+    wait_for(lambda: not leftovers(), 15, 'the supervisor to remove namespaces after a crash')
+    assert script(workspace, 'up').returncode == 0
+    assert script(workspace, 'down').returncode == 0
+    assert not leftovers()
+    assert not os.path.exists(f'/run/cnr_testbed/{NAME}.sock')
