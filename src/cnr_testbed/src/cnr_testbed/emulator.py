@@ -108,7 +108,12 @@ class Forwarder:
             now = time.monotonic()
             dues = [t for t in (self.links['up'].next_due(), self.links['down'].next_due()) if t is not None]
             timeout = max(0.0, min(dues) - now) if dues else 0.5
-            for key, _ in self.sel.select(timeout):
+            # epoll rounds its timeout up to whole milliseconds: wake up early and finish the last
+            # 1.5 ms in short sleeps, still polling the devices, so releases are sub-millisecond exact
+            events = self.sel.select(max(0.0, timeout - 0.0015) if timeout > 0.0015 else 0)
+            if not events and 0 < timeout <= 0.0015:
+                time.sleep(min(timeout, 0.0002))
+            for key, _ in events:
                 if key.data == 'accept':
                     try:
                         conn, _ = self.ctl.accept()
