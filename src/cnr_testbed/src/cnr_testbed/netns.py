@@ -6,7 +6,8 @@ import fcntl
 import os
 import struct
 import subprocess
-from typing import List
+import contextlib
+from typing import Iterator, List
 
 CLONE_NEWNET = 0x40000000
 TUNSETIFF = 0x400454CA
@@ -48,23 +49,30 @@ def delete_namespace(name: str) -> None:
         ip('netns', 'delete', name, check=False)
 
 
-def open_tun(namespace: str, device: str) -> int:
-    """Create a TUN device (IFF_TUN | IFF_NO_PI) inside ``namespace``; returns its fd (non-blocking).
-
-    The device lives as long as the fd: it vanishes when the owning process exits, however it exits.
-    """
+@contextlib.contextmanager
+def inside(namespace: str) -> Iterator[None]:
+    """Run the calling thread inside ``namespace``; sockets created meanwhile stay in it."""
     own = os.open('/proc/self/ns/net', os.O_RDONLY)
     target = os.open(os.path.join(NETNS_DIR, namespace), os.O_RDONLY)
     try:
         _setns(target)
         try:
-            fd = os.open('/dev/net/tun', os.O_RDWR | os.O_NONBLOCK)
-            fcntl.ioctl(fd, TUNSETIFF, struct.pack('16sH', device.encode(), IFF_TUN | IFF_NO_PI))
+            yield
         finally:
             _setns(own)
     finally:
         os.close(own)
         os.close(target)
+
+
+def open_tun(namespace: str, device: str) -> int:
+    """Create a TUN device (IFF_TUN | IFF_NO_PI) inside ``namespace``; returns its fd (non-blocking).
+
+    The device lives as long as the fd: it vanishes when the owning process exits, however it exits.
+    """
+    with inside(namespace):
+        fd = os.open('/dev/net/tun', os.O_RDWR | os.O_NONBLOCK)
+        fcntl.ioctl(fd, TUNSETIFF, struct.pack('16sH', device.encode(), IFF_TUN | IFF_NO_PI))
     return fd
 
 

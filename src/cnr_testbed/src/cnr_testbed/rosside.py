@@ -1,0 +1,151 @@
+"""ROS on one side of a running testbed: a rosmaster and nodes inside the side's network namespace.
+
+Used by the benchmarks and the integration tests::
+
+    with Testbed('config/testbed.yaml') as tb:
+        robot, cloud = RosSide(tb, 'robot'), RosSide(tb, 'cloud')
+        robot.start_master(); cloud.start_master()
+        bridges = start_bridges(robot, cloud, secret_file, allow_topics=['/chatter'])
+        ...
+        cloud.stop(); robot.stop()
+
+Every process runs in its own process group and is stopped with SIGINT, then SIGTERM, then SIGKILL.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import tempfile
+import time
+import xmlrpc.client
+from typing import Dict, List, Optional, Sequence
+
+import yaml
+
+from cnr_testbed import netns
+from cnr_testbed.api import Testbed
+
+BRIDGE_PORT = 11511
+
+
+def stop_process(proc: subprocess.Popen, timeout: float = 10.0) -> Optional[int]:
+    """Stop a process group like roslaunch stops its nodes."""
+    if proc.poll() is None:
+        for sig, wait in ((signal.SIGINT, timeout), (signal.SIGTERM, 3.0), (signal.SIGKILL, 3.0)):
+            try:
+                os.killpg(proc.pid, sig)
+            except ProcessLookupError:
+                break
+            try:
+                proc.wait(wait)
+                break
+            except subprocess.TimeoutExpired:
+                continue
+    else:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except (ProcessLookupError, PermissionError):
+            pass
+    return proc.returncode
+
+
+class RosSide:
+    """One host of the testbed (``robot`` or ``cloud``) with its own environment and, optionally, its master.
+
+    Args:
+        testbed: a running :class:`Testbed`.
+        side: ``robot`` or ``cloud``.
+        master_side: whose master this side's nodes use (single-master set-ups point the cloud at the robot).
+        port: master port (default: chosen at random, never 11311).
+        log_dir: where process output goes.
+    """
+
+    def __init__(self, testbed: Testbed, side: str, master_side: Optional[str] = None, port: int = 0,
+                 log_dir: Optional[str] = None, master_port: Optional[int] = None) -> None:
+        self.testbed = testbed
+        self.side = side
+        self.namespace = testbed.namespace(side)
+        self.address = testbed.robot_address if side == 'robot' else testbed.cloud_address
+        master_side = master_side or side
+        master_address = testbed.robot_address if master_side == 'robot' else testbed.cloud_address
+        self.port = port or master_port or _random_port()
+        self.master_uri = f'http://{master_address}:{self.port}/'
+        self.env = dict(os.environ, ROS_MASTER_URI=self.master_uri, ROS_IP=self.address,
+                        ROS_HOME=os.environ.get('ROS_HOME', os.path.expanduser('~/.ros')))
+        self.env.pop('ROS_HOSTNAME', None)
+        self.log_dir = log_dir or tempfile.mkdtemp(prefix=f'cnr-{side}-')
+        self.procs: List[subprocess.Popen] = []
+        self.master: Optional[subprocess.Popen] = None
+
+    def run(self, argv: Sequence[str], log_name: str = 'proc', env: Optional[Dict[str, str]] = None) -> subprocess.Popen:
+        """Start ``argv`` inside this side's namespace; stopped by :meth:`stop`."""
+        log = open(os.path.join(self.log_dir, f'{log_name}-{time.monotonic_ns()}.log'), 'wb')
+        proc = subprocess.Popen(['ip', 'netns', 'exec', self.namespace, *argv], env=dict(self.env, **(env or {})),
+                                stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                start_new_session=True)
+        proc.log_path = log.name  # type: ignore[attr-defined]
+        log.close()
+        self.procs.append(proc)
+        return proc
+
+    def start_master(self, use_sim_time: bool = False, timeout: float = 20.0) -> None:
+        self.master = self.run(['rosmaster', '--core', '-p', str(self.port)], 'rosmaster')
+        deadline = time.monotonic() + timeout
+        while not self.master_up():
+            if self.master.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f'rosmaster of {self.side} did not start (see {self.master.log_path})')
+            time.sleep(0.05)
+        self.call('setParam', '/use_sim_time', use_sim_time)
+
+    def call(self, method: str, *args):
+        """One Master API call, made from inside this side's namespace."""
+        with netns.inside(self.namespace):
+            code, msg, value = getattr(xmlrpc.client.ServerProxy(self.master_uri), method)('/cnr_testbed', *args)
+        if code != 1:
+            raise RuntimeError(f'{method}{args}: {msg}')
+        return value
+
+    def master_up(self) -> bool:
+        try:
+            self.call('getPid')
+            return True
+        except (OSError, RuntimeError):
+            return False
+
+    def stop_proc(self, proc: subprocess.Popen) -> None:
+        stop_process(proc)
+        if proc in self.procs:
+            self.procs.remove(proc)
+
+    def stop(self) -> None:
+        for proc in reversed(self.procs):
+            stop_process(proc)
+        self.procs.clear()
+        self.master = None
+
+
+def _random_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(('127.0.0.1', 0))
+        port = s.getsockname()[1]
+    return port if port != 11311 else _random_port()
+
+
+def bridge_config(side: RosSide, peer: RosSide, secret_file: str, **settings) -> str:
+    """Write a bridge YAML for ``side`` peering with ``peer``; returns its path."""
+    cfg = dict(name=side.side, listen=f'{side.address}:{BRIDGE_PORT}',
+               peers=[dict(name=peer.side, address=f'{peer.address}:{BRIDGE_PORT}')],
+               secret_file=secret_file, **settings)
+    path = os.path.join(side.log_dir, f'bridge_{side.side}.yaml')
+    with open(path, 'w') as f:
+        yaml.safe_dump(cfg, f)
+    return path
+
+
+def start_bridge(side: RosSide, peer: RosSide, secret_file: str, **settings) -> subprocess.Popen:
+    """The multimaster bridge of ``side`` (rosrun, parameters from a YAML file written for it)."""
+    path = bridge_config(side, peer, secret_file, **settings)
+    return side.run(['roslaunch', 'multimaster_bridge', 'bridge.launch', f'config:={path}',
+                     f'secret_file:={secret_file}', 'output:=log'], f'bridge_{side.side}')

@@ -1,0 +1,210 @@
+"""Registration sync between masters: what to export, what to register, what to remove (ROS-free).
+
+A bridge polls its own master into a :class:`Snapshot`, exports the entries that pass its filters and are
+not its own proxies (:func:`export_state`), and pushes that state to its peers. A peer turns a received
+state into the set of :class:`Registration` it wants in its own master (:func:`plan`) and applies the
+difference to what it registered before (:func:`diff`).
+
+Rules (see the package README):
+
+* **Deny by default**: a topic or service is exported and imported only if it matches an allow glob and
+  no deny glob.
+* **Bridge-owned identities**: remote node ``/talker`` of peer ``cloud`` is registered as
+  ``/cloud/talker`` with the remote node's own XML-RPC URI, so nodes still connect directly over TCPROS
+  but a proxy can never take the name of a local node ("new node registered with same name"). A proxy
+  whose name is taken by a local node is skipped and reported.
+* **Type and md5 checks**: a remote topic whose type or md5sum differs from the local one is rejected.
+* **Services, newest provider wins**: a service on both hosts is served by the provider registered last,
+  so a module started on the other host takes over before the old one stops (make-before-break).
+* **Forced reconnect**: after a peer was lost, its nodes are registered under the other spelling of their
+  URI (with or without the trailing slash). rospy subscribers connect again (they skip a URI they are
+  already connected to, even over a dead TCP link) and the publisher drops the stale connection.
+"""
+from __future__ import annotations
+
+import fnmatch
+import hashlib
+import json
+from dataclasses import dataclass, field
+from typing import Dict, Iterable, List, NamedTuple, Optional, Set, Tuple
+
+
+class Filter:
+    """Allow/deny globs for one kind of name (fnmatch syntax, ``*`` also matches ``/``)."""
+
+    def __init__(self, allow: Iterable[str] = (), deny: Iterable[str] = ()) -> None:
+        self.allow = list(allow)
+        self.deny = list(deny)
+
+    def passes(self, name: str) -> bool:
+        return (any(fnmatch.fnmatchcase(name, g) for g in self.allow)
+                and not any(fnmatch.fnmatchcase(name, g) for g in self.deny))
+
+
+@dataclass
+class Snapshot:
+    """A master's registrations (from getSystemState, getTopicTypes, lookupNode, lookupService)."""
+    pubs: Dict[str, Set[str]] = field(default_factory=dict)      # topic -> node names
+    subs: Dict[str, Set[str]] = field(default_factory=dict)      # topic -> node names
+    services: Dict[str, str] = field(default_factory=dict)       # service -> provider node
+    service_apis: Dict[str, str] = field(default_factory=dict)   # service -> rosrpc URI
+    types: Dict[str, str] = field(default_factory=dict)          # topic -> type
+    nodes: Dict[str, str] = field(default_factory=dict)          # node -> XML-RPC URI
+
+    @classmethod
+    def from_system_state(cls, state: Tuple[list, list, list], types: Iterable[Tuple[str, str]]) -> 'Snapshot':
+        pubs, subs, srvs = state
+        snap = cls()
+        snap.pubs = {t: set(n) for t, n in pubs}
+        snap.subs = {t: set(n) for t, n in subs}
+        snap.services = {s: n[0] for s, n in srvs if n}
+        snap.types = dict(types)
+        return snap
+
+    def node_names(self) -> Set[str]:
+        names: Set[str] = set(self.services.values())
+        for table in (self.pubs, self.subs):
+            for nodes in table.values():
+                names |= nodes
+        return names
+
+
+class Registration(NamedTuple):
+    """One entry the bridge owns in its master. ``extra`` is the topic type or the service URI."""
+    kind: str        # 'pub' | 'sub' | 'srv'
+    name: str        # topic or service
+    caller_id: str   # bridge-owned name, e.g. /cloud/talker
+    caller_api: str  # the remote node's XML-RPC URI (possibly the other spelling)
+    extra: str
+
+
+def proxy_name(peer: str, node: str) -> str:
+    """``/cloud`` + ``/talker`` -> ``/cloud/talker``."""
+    return '/' + peer.strip('/') + '/' + node.lstrip('/')
+
+
+def uri_spelling(uri: str, generation: int) -> str:
+    """The node URI as registered in generation ``generation``: even = as given, odd = the other spelling.
+
+    ``http://h:1234/`` and ``http://h:1234`` reach the same XML-RPC server, but rospy's subscriber
+    treats them as two publishers and dials a fresh TCPROS connection.
+    """
+    base = uri.rstrip('/')
+    canonical_slash = uri.endswith('/')
+    with_slash = canonical_slash if generation % 2 == 0 else not canonical_slash
+    return base + '/' if with_slash else base
+
+
+def export_state(snap: Snapshot, owned: Set[str], topics: Filter, services: Filter,
+                 ages: Dict[str, float], md5s: Dict[str, str]) -> dict:
+    """The part of ``snap`` a peer may import: filtered, without the bridge's own proxies.
+
+    Args:
+        owned: caller_ids of the bridge's proxies (never exported back: no echo).
+        ages: service -> seconds since its current provider was first seen (for newest-wins).
+        md5s: type -> md5sum where the message class is known locally.
+    """
+    def local(nodes: Set[str]) -> List[str]:
+        return sorted(n for n in nodes if n not in owned and n in snap.nodes)
+
+    pubs = {t: local(n) for t, n in snap.pubs.items() if topics.passes(t)}
+    subs = {t: local(n) for t, n in snap.subs.items() if topics.passes(t)}
+    pubs = {t: n for t, n in pubs.items() if n and t in snap.types}
+    subs = {t: n for t, n in subs.items() if n}
+    srvs = {s: [n, snap.service_apis[s], round(ages.get(s, 0.0), 3)]
+            for s, n in snap.services.items()
+            if services.passes(s) and n not in owned and n in snap.nodes and s in snap.service_apis}
+    used = {n for v in pubs.values() for n in v} | {n for v in subs.values() for n in v} | \
+        {v[0] for v in srvs.values()}
+    types = {t: snap.types.get(t, '*') for t in set(pubs) | set(subs)}
+    return {'pubs': pubs, 'subs': subs, 'srvs': srvs, 'types': types,
+            'md5': {ty: md5s[ty] for ty in set(types.values()) if ty in md5s},
+            'nodes': {n: snap.nodes[n] for n in sorted(used)}}
+
+
+def digest(state: dict) -> str:
+    """Stable digest of an exported state (services' ages excluded: they change every poll)."""
+    stable = dict(state)
+    stable['srvs'] = {s: v[:2] for s, v in state.get('srvs', {}).items()}
+    return hashlib.sha1(json.dumps(stable, sort_keys=True).encode()).hexdigest()[:16]
+
+
+@dataclass
+class Plan:
+    registrations: Set[Registration]
+    problems: List[str]
+
+
+def plan(peer: str, state: dict, local: Snapshot, owned: Set[str], topics: Filter, services: Filter,
+         local_ages: Dict[str, float], md5s: Dict[str, str], generation: int = 0) -> Plan:
+    """The registrations of ``peer``'s ``state`` this bridge wants in its master.
+
+    Args:
+        local: the local master now (including the bridge's proxies).
+        owned: caller_ids of the bridge's proxies.
+        local_ages: service -> age of its local provider [s], for newest-provider-wins.
+        md5s: type -> local md5sum.
+        generation: reconnect generation of this peer (selects the URI spelling).
+    """
+    out: Set[Registration] = set()
+    problems: List[str] = []
+    nodes: Dict[str, str] = state.get('nodes', {})
+    types: Dict[str, str] = state.get('types', {})
+    remote_md5: Dict[str, str] = state.get('md5', {})
+
+    def identity(node: str) -> Optional[Tuple[str, str]]:
+        uri = nodes.get(node)
+        if not uri:
+            return None
+        cid = proxy_name(peer, node)
+        if cid in local.nodes and cid not in owned:
+            problems.append(f'{peer}: node {node} not imported: local node {cid} has that name')
+            return None
+        return cid, uri_spelling(uri, generation)
+
+    def topic_ok(topic: str) -> bool:
+        if not topics.passes(topic):
+            return False
+        rtype = types.get(topic, '*')
+        ltype = local.types.get(topic)
+        if rtype != '*' and ltype not in (None, '*', rtype):
+            problems.append(f'{peer}: topic {topic} rejected: type {rtype} there, {ltype} here')
+            return False
+        if rtype in remote_md5 and rtype in md5s and remote_md5[rtype] != md5s[rtype]:
+            problems.append(f'{peer}: topic {topic} rejected: {rtype} md5 {remote_md5[rtype]} there, '
+                            f'{md5s[rtype]} here')
+            return False
+        return True
+
+    for kind, table in (('pub', state.get('pubs', {})), ('sub', state.get('subs', {}))):
+        for topic, node_list in table.items():
+            if not topic_ok(topic):
+                continue
+            for node in node_list:
+                ident = identity(node)
+                if ident:
+                    out.add(Registration(kind, topic, ident[0], ident[1], types.get(topic, '*')))
+
+    for service, (node, service_api, age) in state.get('srvs', {}).items():
+        if not services.passes(service):
+            continue
+        provider = local.services.get(service)
+        if provider is not None and provider not in owned and local_ages.get(service, 0.0) <= age:
+            continue  # a local provider registered after the remote one: it wins
+        ident = identity(node)
+        if ident:
+            out.add(Registration('srv', service, ident[0], ident[1], service_api))
+    return Plan(out, problems)
+
+
+def diff(current: Set[Registration], desired: Set[Registration]) -> Tuple[List[Registration], List[Registration]]:
+    """(to unregister, to register): unregistrations first, so a node's URI spelling never changes in place."""
+    return sorted(current - desired), sorted(desired - current)
+
+
+def conflicting_identities(to_register: Iterable[Registration], keep: Iterable[Registration]) -> Set[str]:
+    """caller_ids that would be registered with two different URIs at once (must wait for removals)."""
+    apis: Dict[str, Set[str]] = {}
+    for reg in list(to_register) + list(keep):
+        apis.setdefault(reg.caller_id, set()).add(reg.caller_api)
+    return {cid for cid, a in apis.items() if len(a) > 1}

@@ -1,0 +1,403 @@
+"""The ``bridge`` node: joins this host's rosmaster with its peers' (see the package README).
+
+ROS I/O only: the sync rules are in :mod:`multimaster_bridge.core.sync`, the wire format in
+:mod:`multimaster_bridge.core.protocol`, link estimation in :mod:`multimaster_bridge.core.heartbeat`.
+"""
+from __future__ import annotations
+
+import math
+import socket
+import threading
+import time
+import xmlrpc.client
+from typing import Dict, List, Optional, Set, Tuple
+
+import rosgraph
+import rospy
+
+from cnr_msgs.msg import LinkQuality
+from cnr_params import exit_on_config_error
+from cnr_params.ros import private_section
+from multimaster_bridge.core import config as bridge_config
+from multimaster_bridge.core import protocol, sync
+from multimaster_bridge.core.heartbeat import LinkEstimator
+
+MAX_DATAGRAM = 65000
+
+
+class PeerState:
+    def __init__(self, peer: bridge_config.Peer, cfg: bridge_config.BridgeConfig) -> None:
+        self.peer = peer
+        self.estimator = LinkEstimator(cfg.heartbeat_rate, cfg.loss_timeout)
+        self.alive = False
+        self.state: Optional[dict] = None
+        self.state_digest = ''
+        self.announced_digest = ''
+        self.generation = 0
+        self.last_hb: Optional[Tuple[float, float]] = None   # (peer's t1, our receive time t2)
+        self.last_req = -math.inf
+        self.registered: Set[sync.Registration] = set()
+        self.lost_at = -math.inf
+        self.returned_at = -math.inf
+
+
+class MasterClient:
+    """Batched Master API calls (one HTTP request per batch) on behalf of the bridge."""
+
+    def __init__(self, uri: str, caller_id: str) -> None:
+        self.uri = uri
+        self.caller_id = caller_id
+
+    def _proxy(self) -> xmlrpc.client.ServerProxy:
+        return xmlrpc.client.ServerProxy(self.uri)
+
+    def snapshot(self, previous: Optional[sync.Snapshot], refresh_nodes: bool) -> sync.Snapshot:
+        multi = xmlrpc.client.MultiCall(self._proxy())
+        multi.getSystemState(self.caller_id)
+        multi.getTopicTypes(self.caller_id)
+        (c1, _, state), (c2, _, types) = tuple(multi())
+        snap = sync.Snapshot.from_system_state(state, types if c2 == 1 else [])
+        names = sorted(snap.node_names())
+        services = sorted(snap.services)
+        if (previous is not None and not refresh_nodes and set(names) <= set(previous.nodes)
+                and set(services) <= set(previous.service_apis)):
+            snap.nodes = {n: previous.nodes[n] for n in names}
+            snap.service_apis = {s: previous.service_apis[s] for s in services}
+            return snap
+        multi = xmlrpc.client.MultiCall(self._proxy())
+        for n in names:
+            multi.lookupNode(self.caller_id, n)
+        for s in services:
+            multi.lookupService(self.caller_id, s)
+        results = list(multi()) if names or services else []
+        for n, (code, _, uri) in zip(names, results[:len(names)]):
+            if code == 1:
+                snap.nodes[n] = uri
+        for s, (code, _, uri) in zip(services, results[len(names):]):
+            if code == 1:
+                snap.service_apis[s] = uri
+        return snap
+
+    def apply(self, unregister: List[sync.Registration], register: List[sync.Registration]) -> List[str]:
+        """Unregistrations then registrations in one batch; returns failures."""
+        if not unregister and not register:
+            return []
+        multi = xmlrpc.client.MultiCall(self._proxy())
+        for r in unregister:
+            if r.kind == 'pub':
+                multi.unregisterPublisher(r.caller_id, r.name, r.caller_api)
+            elif r.kind == 'sub':
+                multi.unregisterSubscriber(r.caller_id, r.name, r.caller_api)
+            else:
+                multi.unregisterService(r.caller_id, r.name, r.extra)
+        for r in register:
+            if r.kind == 'pub':
+                multi.registerPublisher(r.caller_id, r.name, r.extra, r.caller_api)
+            elif r.kind == 'sub':
+                multi.registerSubscriber(r.caller_id, r.name, r.extra, r.caller_api)
+            else:
+                multi.registerService(r.caller_id, r.name, r.extra, r.caller_api)
+        failures = []
+        for r, result in zip(unregister + register, multi()):
+            if result[0] != 1:
+                failures.append(f'{r.kind} {r.name} as {r.caller_id}: {result[1]}')
+        return failures
+
+    def register_service(self, caller_id: str, service: str, service_api: str, caller_api: str) -> None:
+        self._proxy().registerService(caller_id, service, service_api, caller_api)
+
+
+class Bridge:
+    def __init__(self, cfg: bridge_config.BridgeConfig, master_uri: str, caller_id: str) -> None:
+        self.cfg = cfg
+        self.master = MasterClient(master_uri, caller_id)
+        self.session = protocol.new_session()
+        self.seq = 0
+        self.guard = protocol.ReplayGuard()
+        self.peers: Dict[str, PeerState] = {p.name: PeerState(p, cfg) for p in cfg.peers}
+        self.lock = threading.RLock()
+        self.wake = threading.Event()
+        self.sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self.sock.bind(cfg.listen)
+        self.snapshot: Optional[sync.Snapshot] = None
+        self.export: dict = {}
+        self.export_digest = ''
+        self.service_first_seen: Dict[Tuple[str, str, str], float] = {}
+        self.shadowed: Dict[str, Tuple[str, str, str]] = {}   # service -> local (node, service_api, node_api)
+        self.md5s: Dict[str, str] = {}
+        self.local_ages: Dict[str, float] = {}
+        self.local_md5s: Dict[str, str] = {}
+        self.reported: Set[str] = set()
+        self.last_node_refresh = -math.inf
+        self.master_ok = True
+        self.stopped = False
+        self.quality_pub = rospy.Publisher('link_quality', LinkQuality, queue_size=10)
+
+    # ---------------------------------------------------------------- wire
+    def _send(self, peer: PeerState, kind: str, **body) -> None:
+        self.seq += 1
+        msg = dict(body, kind=kind, seq=self.seq, session=self.session, **{'from': self.cfg.name})
+        data = protocol.encode(self.cfg.secret, msg)
+        if len(data) > MAX_DATAGRAM:
+            self._report(f'state too large for one datagram ({len(data)} B): narrow allow_topics')
+            return
+        try:
+            self.sock.sendto(data, (peer.peer.host, peer.peer.port))
+        except OSError as exc:
+            rospy.logwarn_throttle(10.0, f'bridge: cannot send to {peer.peer.name} '
+                                         f'{peer.peer.host}:{peer.peer.port}: {exc.strerror}')
+
+    def _heartbeat(self, peer: PeerState) -> None:
+        echo = None
+        if peer.last_hb is not None:
+            t1, t2 = peer.last_hb
+            echo = [t1, t2, time.time()]
+        peer.estimator.on_sent()
+        self._send(peer, 'hb', t1=time.time(), echo=echo, digest=self.export_digest)
+
+    def receive_loop(self) -> None:
+        while not self.stopped:
+            try:
+                data, addr = self.sock.recvfrom(MAX_DATAGRAM + 1024)
+            except OSError:
+                return
+            now_wall, now = time.time(), time.monotonic()
+            try:
+                msg = protocol.decode(self.cfg.secret, data)
+            except protocol.ProtocolError as exc:
+                rospy.logwarn_throttle(5.0, f'bridge: ignored datagram from {addr[0]}:{addr[1]}: {exc}')
+                continue
+            with self.lock:
+                peer = self.peers.get(msg['from'])
+                if peer is None:
+                    rospy.logwarn_throttle(5.0, f"bridge: ignored datagram from unknown peer "
+                                                f"'{msg['from']}' at {addr[0]}:{addr[1]}")
+                    continue
+                if not self.guard.accept(msg):
+                    continue
+                self._handle(peer, msg, now, now_wall)
+
+    def _handle(self, peer: PeerState, msg: dict, now: float, now_wall: float) -> None:
+        kind = msg['kind']
+        if kind == 'hb':
+            echo = msg.get('echo')
+            if echo:
+                peer.estimator.on_heartbeat(now, echo[0], echo[1], echo[2], t4=now_wall)
+            else:
+                peer.estimator.on_heartbeat(now)
+            peer.last_hb = (msg['t1'], now_wall)
+            if not peer.alive:
+                peer.alive = True
+                peer.returned_at = now
+                rospy.loginfo(f'bridge: peer {peer.peer.name} is up '
+                              f'({peer.peer.host}:{peer.peer.port}); requesting its state')
+                self._send(peer, 'req')
+                peer.last_req = now
+                self._send(peer, 'state', state=self.export, digest=self.export_digest)
+            elif msg.get('digest') != peer.state_digest and now - peer.last_req > 0.3:
+                self._send(peer, 'req')
+                peer.last_req = now
+        elif kind == 'state':
+            if peer.alive:
+                peer.state = msg['state']
+                peer.state_digest = msg['digest']
+                self.wake.set()
+        elif kind == 'req':
+            self._send(peer, 'state', state=self.export, digest=self.export_digest)
+        elif kind == 'bye':
+            rospy.loginfo(f'bridge: peer {peer.peer.name} said goodbye')
+            peer.estimator.last_heard = -math.inf
+            self.wake.set()
+
+    # ---------------------------------------------------------------- sync
+    def _report(self, problem: str) -> None:
+        if problem not in self.reported:
+            self.reported.add(problem)
+            rospy.logwarn(f'bridge: {problem}')
+
+    def _md5(self, msg_type: str) -> Optional[str]:
+        if msg_type not in self.md5s:
+            try:
+                import roslib.message
+                cls = roslib.message.get_message_class(msg_type)
+                self.md5s[msg_type] = cls._md5sum if cls is not None else ''
+            except Exception:  # noqa: BLE001 - an unknown package is not an error here
+                self.md5s[msg_type] = ''
+        return self.md5s[msg_type] or None
+
+    def owned(self) -> Set[str]:
+        return {r.caller_id for p in self.peers.values() for r in p.registered}
+
+    def poll(self, now: float) -> None:
+        refresh = now - self.last_node_refresh > 1.0
+        snap = self.master.snapshot(self.snapshot, refresh)
+        if refresh:
+            self.last_node_refresh = now
+        self.snapshot = snap
+        owned = self.owned()
+        ages = {}
+        seen = {}
+        for s, node in snap.services.items():
+            key = (s, node, snap.service_apis.get(s, ''))
+            seen[key] = self.service_first_seen.get(key, now)
+            ages[s] = now - seen[key]
+        self.service_first_seen = seen
+        md5s = {t: m for t in set(snap.types.values()) for m in [self._md5(t)] if m}
+        export = sync.export_state(snap, owned, self.cfg.topics, self.cfg.services, ages, md5s)
+        dig = sync.digest(export)
+        with self.lock:
+            self.export = export
+            changed = dig != self.export_digest
+            self.export_digest = dig
+            if changed:
+                for peer in self.peers.values():
+                    if peer.alive:
+                        self._send(peer, 'state', state=export, digest=dig)
+        self.local_ages = ages
+        self.local_md5s = md5s
+
+    def _expire(self, now: float) -> None:
+        for peer in self.peers.values():
+            if peer.alive and not peer.estimator.alive(now):
+                peer.alive = False
+                peer.lost_at = now
+                peer.state = None
+                peer.state_digest = ''
+                peer.generation += 1
+                rospy.logwarn(f'bridge: peer {peer.peer.name} lost (nothing heard for '
+                              f'{self.cfg.loss_timeout:.1f} s): removing its {len(peer.registered)} '
+                              f'registrations')
+
+    def reconcile(self) -> None:
+        snap = self.snapshot
+        if snap is None:
+            return
+        owned = self.owned()
+        for peer in self.peers.values():
+            with self.lock:
+                state = peer.state if peer.alive else None
+                generation = peer.generation
+            if state is None:
+                desired: Set[sync.Registration] = set()
+            else:
+                result = sync.plan(peer.peer.name, state, snap, owned, self.cfg.topics, self.cfg.services,
+                                   self.local_ages, self.local_md5s, generation)
+                for problem in result.problems:
+                    self._report(problem)
+                desired = result.registrations
+            unregister, register = sync.diff(peer.registered, desired)
+            # a proxy's URI spelling changes only after its old registrations are gone from the master
+            waiting = {r.caller_id for r in register
+                       if r.caller_id in snap.nodes and snap.nodes[r.caller_id] != r.caller_api}
+            waiting |= sync.conflicting_identities(register, peer.registered - set(unregister))
+            register = [r for r in register if r.caller_id not in waiting]
+            for r in register:
+                if r.kind == 'srv':
+                    provider = snap.services.get(r.name)
+                    if provider is not None and provider not in owned and provider in snap.nodes:
+                        self.shadowed[r.name] = (provider, snap.service_apis.get(r.name, ''),
+                                                 snap.nodes[provider])
+            if not unregister and not register:
+                continue
+            started = time.monotonic()
+            failures = self.master.apply(unregister, register)
+            for f in failures:
+                self._report(f'master refused {f}')
+            peer.registered = (peer.registered - set(unregister)) | set(register)
+            self._restore_shadowed([r for r in unregister if r.kind == 'srv'])
+            rospy.loginfo(f'bridge: {peer.peer.name}: -{len(unregister)} +{len(register)} registrations '
+                          f'in {1000 * (time.monotonic() - started):.1f} ms')
+
+    def _restore_shadowed(self, removed: List[sync.Registration]) -> None:
+        """A local provider hidden by a removed proxy serves its service again."""
+        snap = self.snapshot
+        for r in removed:
+            local = self.shadowed.pop(r.name, None)
+            if local is None or any(x.kind == 'srv' and x.name == r.name
+                                    for p in self.peers.values() for x in p.registered):
+                continue
+            node, service_api, node_api = local
+            if snap is not None and snap.nodes.get(node) == node_api and service_api:
+                try:
+                    self.master.register_service(node, r.name, service_api, node_api)
+                    rospy.loginfo(f'bridge: {r.name} served by local {node} again')
+                except (OSError, xmlrpc.client.Error) as exc:
+                    rospy.logwarn(f'bridge: cannot restore {r.name} of {node}: {exc}')
+
+    def publish_quality(self) -> None:
+        now = time.monotonic()
+        for peer in self.peers.values():
+            q = peer.estimator.quality(now)
+            msg = LinkQuality()
+            msg.header.stamp = rospy.Time.now()
+            msg.local_name = self.cfg.name
+            msg.peer = peer.peer.name
+            msg.alive = peer.alive and peer.estimator.alive(now)
+            msg.rtt, msg.rtt_stddev, msg.loss = q.rtt, q.rtt_stddev, q.loss
+            msg.clock_offset = q.clock_offset
+            msg.heartbeat_rate = self.cfg.heartbeat_rate
+            msg.sent, msg.received = q.sent, q.received
+            self.quality_pub.publish(msg)
+
+    def spin(self) -> None:
+        threading.Thread(target=self.receive_loop, name='bridge-rx', daemon=True).start()
+        period = 1.0 / self.cfg.poll_rate
+        hb_period = 1.0 / self.cfg.heartbeat_rate
+        q_period = 1.0 / self.cfg.quality_rate
+        next_poll = next_hb = next_q = time.monotonic()
+        rospy.loginfo(f'bridge {self.cfg.name}: listening on {self.cfg.listen[0]}:{self.cfg.listen[1]}, '
+                      f'peers ' + ', '.join(f'{p.name}@{p.host}:{p.port}' for p in self.cfg.peers))
+        while not rospy.is_shutdown():
+            now = time.monotonic()
+            if now >= next_hb:
+                next_hb = max(next_hb + hb_period, now)
+                with self.lock:
+                    for peer in self.peers.values():
+                        self._heartbeat(peer)
+            try:
+                if now >= next_poll or self.wake.is_set():
+                    self.wake.clear()
+                    if now >= next_poll:
+                        next_poll = max(next_poll + period, now)
+                        self.poll(now)
+                    with self.lock:
+                        self._expire(time.monotonic())
+                    self.reconcile()
+                if not self.master_ok:
+                    rospy.loginfo('bridge: master reachable again')
+                    self.master_ok = True
+            except (OSError, xmlrpc.client.Error) as exc:
+                if self.master_ok:
+                    rospy.logwarn(f'bridge: local master {self.master.uri} unreachable: {exc}')
+                self.master_ok = False
+            if now >= next_q:
+                next_q = max(next_q + q_period, now)
+                self.publish_quality()
+            self.wake.wait(max(0.0, min(next_poll, next_hb, next_q) - time.monotonic()))
+
+    def shutdown(self) -> None:
+        """Say goodbye and remove every registration this bridge made."""
+        with self.lock:
+            for peer in self.peers.values():
+                self._send(peer, 'bye')
+        for peer in self.peers.values():
+            try:
+                self.master.apply(sorted(peer.registered), [])
+            except (OSError, xmlrpc.client.Error):
+                pass
+            peer.registered = set()
+        self.stopped = True
+        self.sock.close()
+
+
+@exit_on_config_error
+def main() -> None:
+    rospy.init_node('bridge')
+    cfg = bridge_config.parse(private_section('~'))
+    try:
+        bridge = Bridge(cfg, rosgraph.get_master_uri(), rospy.get_name())
+    except OSError as exc:
+        raise bridge_config.ConfigError(rospy.resolve_name('~'), 'listen',
+                                        f'cannot bind {cfg.listen[0]}:{cfg.listen[1]}: {exc.strerror}') from None
+    rospy.on_shutdown(bridge.shutdown)
+    bridge.spin()

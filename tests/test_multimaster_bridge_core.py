@@ -1,0 +1,183 @@
+"""multimaster_bridge without a master: sync rules, wire format, heartbeat estimation, configuration."""
+import math
+
+import pytest
+
+from cnr_params import ConfigError, Section
+from multimaster_bridge.core import config, protocol, sync
+from multimaster_bridge.core.heartbeat import LinkEstimator
+
+ALL = sync.Filter(['*'])
+
+
+def snapshot(pubs=None, subs=None, services=None, types=None, nodes=None, service_apis=None):
+    snap = sync.Snapshot(pubs={k: set(v) for k, v in (pubs or {}).items()},
+                         subs={k: set(v) for k, v in (subs or {}).items()},
+                         services=dict(services or {}), types=dict(types or {}),
+                         service_apis=dict(service_apis or {}))
+    snap.nodes = dict(nodes) if nodes is not None else {n: f'http://h:{1000 + i}/'
+                                                        for i, n in enumerate(sorted(snap.node_names()))}
+    return snap
+
+
+def test_filter_denies_by_default_and_deny_beats_allow():
+    assert not sync.Filter().passes('/chatter')
+    f = sync.Filter(['/move_base/*', '/tf'], ['*/set_logger_level'])
+    assert f.passes('/move_base/goal') and f.passes('/tf') and not f.passes('/tf_static')
+    assert not f.passes('/move_base/set_logger_level')
+
+
+def test_export_skips_own_proxies_filtered_names_and_unknown_nodes():
+    snap = snapshot(pubs={'/chatter': ['/talker', '/cloud/talker'], '/secret': ['/talker']},
+                    subs={'/chatter': ['/listener']}, types={'/chatter': 'std_msgs/String', '/secret': 'std_msgs/String'},
+                    services={'/add': '/adder', '/cloud_srv': '/cloud/x'},
+                    service_apis={'/add': 'rosrpc://h:1', '/cloud_srv': 'rosrpc://h:2'})
+    state = sync.export_state(snap, {'/cloud/talker', '/cloud/x'}, sync.Filter(['/chatter']), ALL,
+                              {'/add': 2.0}, {'std_msgs/String': 'abc'})
+    assert state['pubs'] == {'/chatter': ['/talker']}
+    assert state['subs'] == {'/chatter': ['/listener']}
+    assert state['srvs'] == {'/add': ['/adder', 'rosrpc://h:1', 2.0]}
+    assert set(state['nodes']) == {'/talker', '/listener', '/adder'}
+    assert state['md5'] == {'std_msgs/String': 'abc'}
+    # the digest ignores service ages, which change on every poll
+    again = sync.export_state(snap, {'/cloud/talker', '/cloud/x'}, sync.Filter(['/chatter']), ALL,
+                              {'/add': 7.5}, {'std_msgs/String': 'abc'})
+    assert sync.digest(state) == sync.digest(again)
+
+
+def remote_state(**kw):
+    base = {'pubs': {'/chatter': ['/talker']}, 'subs': {'/cmd': ['/base']},
+            'srvs': {}, 'types': {'/chatter': 'std_msgs/String', '/cmd': 'geometry_msgs/Twist'},
+            'md5': {'std_msgs/String': '992ce8a1687cec8c8bd883ec73ca41d1'},
+            'nodes': {'/talker': 'http://10.77.0.2:4001/', '/base': 'http://10.77.0.2:4002/'}}
+    base.update(kw)
+    return base
+
+
+def test_plan_registers_remote_nodes_under_bridge_owned_names():
+    result = sync.plan('cloud', remote_state(), snapshot(), set(), ALL, ALL, {}, {})
+    assert result.registrations == {
+        sync.Registration('pub', '/chatter', '/cloud/talker', 'http://10.77.0.2:4001/', 'std_msgs/String'),
+        sync.Registration('sub', '/cmd', '/cloud/base', 'http://10.77.0.2:4002/', 'geometry_msgs/Twist')}
+    assert result.problems == []
+
+
+def test_plan_never_takes_the_name_of_a_local_node():
+    local = snapshot(pubs={'/other': ['/cloud/talker']}, types={'/other': 'std_msgs/Int32'})
+    result = sync.plan('cloud', remote_state(), local, set(), ALL, ALL, {}, {})
+    assert all(r.caller_id != '/cloud/talker' for r in result.registrations)
+    assert any('local node /cloud/talker' in p for p in result.problems)
+    # but it re-plans its own proxy of that name
+    result = sync.plan('cloud', remote_state(), local, {'/cloud/talker'}, ALL, ALL, {}, {})
+    assert any(r.caller_id == '/cloud/talker' for r in result.registrations)
+
+
+def test_plan_rejects_type_and_md5_conflicts():
+    local = snapshot(pubs={'/chatter': ['/me']}, types={'/chatter': 'std_msgs/Int32'})
+    result = sync.plan('cloud', remote_state(), local, set(), ALL, ALL, {}, {})
+    assert not any(r.name == '/chatter' for r in result.registrations)
+    assert any('type std_msgs/String there, std_msgs/Int32 here' in p for p in result.problems)
+    result = sync.plan('cloud', remote_state(), snapshot(), set(), ALL, ALL, {}, {'std_msgs/String': 'ffff'})
+    assert not any(r.name == '/chatter' for r in result.registrations)
+    assert any('md5' in p for p in result.problems)
+
+
+def test_plan_applies_the_filters_on_import_too():
+    result = sync.plan('cloud', remote_state(), snapshot(), set(), sync.Filter(['/cmd']), ALL, {}, {})
+    assert {r.name for r in result.registrations} == {'/cmd'}
+
+
+def test_services_newest_provider_wins_both_ways():
+    state = remote_state(srvs={'/echo': ['/monitor', 'rosrpc://10.77.0.2:5000', 1.0]},
+                         nodes={'/monitor': 'http://10.77.0.2:4003/'})
+    local = snapshot(services={'/echo': '/old_monitor'}, service_apis={'/echo': 'rosrpc://10.77.0.1:5000'})
+    # the local provider has been there for 30 s, the remote one for 1 s: the remote one takes over
+    taken = sync.plan('cloud', state, local, set(), ALL, ALL, {'/echo': 30.0}, {})
+    assert sync.Registration('srv', '/echo', '/cloud/monitor', 'http://10.77.0.2:4003/',
+                             'rosrpc://10.77.0.2:5000') in taken.registrations
+    # a local provider started after the remote one keeps the service
+    kept = sync.plan('cloud', state, local, set(), ALL, ALL, {'/echo': 0.2}, {})
+    assert not any(r.kind == 'srv' for r in kept.registrations)
+    # when the master already points at our own proxy, the remote provider stays registered
+    proxied = snapshot(services={'/echo': '/cloud/monitor'}, service_apis={'/echo': 'rosrpc://10.77.0.2:5000'})
+    assert any(r.kind == 'srv' for r in sync.plan('cloud', state, proxied, {'/cloud/monitor'}, ALL, ALL,
+                                                   {'/echo': 0.0}, {}).registrations)
+
+
+def test_uri_spelling_alternates_per_generation():
+    assert sync.uri_spelling('http://h:1/', 0) == 'http://h:1/'
+    assert sync.uri_spelling('http://h:1/', 1) == 'http://h:1'
+    assert sync.uri_spelling('http://h:1/', 2) == 'http://h:1/'
+    assert sync.uri_spelling('http://h:1', 1) == 'http://h:1/'
+
+
+def test_diff_and_identity_conflicts():
+    a = sync.Registration('pub', '/t', '/cloud/n', 'http://h:1/', 'std_msgs/String')
+    b = sync.Registration('pub', '/t', '/cloud/n', 'http://h:1', 'std_msgs/String')
+    unregister, register = sync.diff({a}, {b})
+    assert unregister == [a] and register == [b]
+    assert sync.conflicting_identities([b], [a]) == {'/cloud/n'}
+    assert sync.conflicting_identities([b], []) == set()
+
+
+def test_protocol_authenticates_and_rejects_replays():
+    msg = {'from': 'robot', 'session': 's1', 'seq': 1, 'kind': 'hb', 't1': 1.5}
+    data = protocol.encode(b'secret-one', msg)
+    assert protocol.decode(b'secret-one', data) == msg
+    with pytest.raises(protocol.ProtocolError, match='HMAC'):
+        protocol.decode(b'secret-two', data)
+    with pytest.raises(protocol.ProtocolError):
+        protocol.decode(b'secret-one', b'garbage')
+    tampered = data[:-1] + bytes([data[-1] ^ 1])
+    with pytest.raises(protocol.ProtocolError):
+        protocol.decode(b'secret-one', tampered)
+    guard = protocol.ReplayGuard()
+    assert guard.accept(msg) and not guard.accept(msg)
+    assert guard.accept(dict(msg, seq=2)) and guard.accept(dict(msg, session='s2', seq=1))
+
+
+def test_link_estimator_rtt_offset_and_loss():
+    est = LinkEstimator(rate=10.0, loss_timeout=1.5)
+    # peer clock is 5 s ahead; one-way delay 20 ms each way; the peer holds the heartbeat 3 ms
+    for i in range(20):
+        t1 = 100.0 + i * 0.1
+        t2 = t1 + 0.020 + 5.0
+        t3 = t2 + 0.003
+        t4 = t3 - 5.0 + 0.020
+        est.on_heartbeat(t4, t1, t2, t3)
+    q = est.quality(t4)
+    assert q.rtt == pytest.approx(0.040, abs=1e-9)
+    assert q.clock_offset == pytest.approx(5.0, abs=1e-9)
+    assert q.alive and q.loss < 0.1
+    assert not est.alive(t4 + 1.6)
+    # half of the heartbeats lost
+    est2 = LinkEstimator(rate=10.0, loss_timeout=1.5)
+    for i in range(0, 100, 2):
+        est2.on_heartbeat(i * 0.1)
+    assert est2.quality(9.9).loss == pytest.approx(0.5, abs=0.05)
+    assert math.isnan(est2.quality(9.9).rtt)
+
+
+def section(**kw):
+    base = dict(name='robot', listen='10.77.0.1:11511', peers=[dict(name='cloud', address='10.77.0.2:11511')],
+                secret='0123456789', allow_topics=['/tf'])
+    base.update(kw)
+    return Section({k: v for k, v in base.items() if v is not None}, '/bridge')
+
+
+def test_config_parses_and_rejects_bad_values(tmp_path):
+    cfg = config.parse(section())
+    assert cfg.listen == ('10.77.0.1', 11511) and cfg.peers[0].name == 'cloud'
+    assert cfg.topics.passes('/tf') and not cfg.services.passes('/anything')
+    secret = tmp_path / 'secret'
+    secret.write_text('file-secret-123\n')
+    assert config.parse(section(secret=None, secret_file=str(secret))).secret == b'file-secret-123'
+    for kw, field in ((dict(secret=None), 'secret'), (dict(secret='short'), 'secret'),
+                      (dict(peers=[]), 'peers'), (dict(listen='nowhere'), 'listen'),
+                      (dict(peers=[dict(name='cloud', address='h:99999')]), 'address'),
+                      (dict(peers=[dict(name='robot', address='h:1')]), 'name'),
+                      (dict(secret=None, secret_file=str(tmp_path / 'missing')), 'secret_file'),
+                      (dict(loss_timeout=0.1), 'loss_timeout'), (dict(allow_topics=[3]), 'allow_topics')):
+        with pytest.raises(ConfigError) as err:
+            config.parse(section(**kw))
+        assert field in str(err.value) and str(err.value).startswith('/bridge: ')
