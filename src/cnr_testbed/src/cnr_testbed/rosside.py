@@ -148,4 +148,4 @@ def start_bridge(side: RosSide, peer: RosSide, secret_file: str, **settings) -> 
     """The multimaster bridge of ``side`` (rosrun, parameters from a YAML file written for it)."""
     path = bridge_config(side, peer, secret_file, **settings)
     return side.run(['roslaunch', 'multimaster_bridge', 'bridge.launch', f'config:={path}',
-                     f'secret_file:={secret_file}', 'output:=log'], f'bridge_{side.side}')
+                     f'secret_file:={secret_file}', 'output:=screen'], f'bridge_{side.side}')
