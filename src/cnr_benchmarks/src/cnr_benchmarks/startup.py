@@ -58,6 +58,36 @@ def node_gone(side, node: str) -> bool:
     return not any(node in nodes for _, nodes in pubs + subs + srvs)
 
 
+def cleanup_node(side, node: str) -> int:
+    """Remove what a dead node left registered, as ``rosnode cleanup`` does; returns how many entries."""
+    from cnr_testbed import netns
+    pubs, subs, srvs = side.call('getSystemState')
+    with netns.inside(side.namespace):
+        master = xmlrpc.client.ServerProxy(side.master_uri)
+        code, _, api = master.lookupNode('/bench', node)
+        if code != 1:
+            return 0
+        multi = xmlrpc.client.MultiCall(master)
+        n = 0
+        for topic, nodes in pubs:
+            if node in nodes:
+                multi.unregisterPublisher(node, topic, api)
+                n += 1
+        for topic, nodes in subs:
+            if node in nodes:
+                multi.unregisterSubscriber(node, topic, api)
+                n += 1
+        for service, nodes in srvs:
+            if node in nodes:
+                code, _, service_api = master.lookupService('/bench', service)
+                if code == 1:
+                    multi.unregisterService(node, service, service_api)
+                    n += 1
+        if n:
+            multi()
+    return n
+
+
 def load_params(side) -> None:
     from cnr_navigation.startup_audit import load_navigation_params
     from cnr_testbed import netns
@@ -110,12 +140,19 @@ class Setup:
                 time.sleep(0.02)
             return time.monotonic() - t0
         finally:
-            self.cloud.stop_proc(proc)
-            deadline = time.monotonic() + 120
+            t_stop = time.monotonic()
+            self.cloud.stop_proc(proc)   # SIGINT; rospy unregisters (across the link for SM)
+            self.last_stop = (time.monotonic() - t_stop, proc.returncode)
+            # a node stopped early in its start-up may leave registrations behind: clean up like rosnode cleanup
+            stale = cleanup_node(self.nav_master, '/move_base')
+            if stale:
+                report.progress(f'    (removed {stale} registrations the stopped move_base left behind; it took '
+                                f'{self.last_stop[0]:.1f} s to stop, exit status {self.last_stop[1]})')
+            deadline = time.monotonic() + 60
             while not (node_gone(self.robot, self.node)
                        and (self.cloud_master is None or node_gone(self.cloud_master, '/move_base'))):
                 if time.monotonic() > deadline:
-                    break
+                    raise RuntimeError(f'{self.node} still registered 60 s after it stopped')
                 time.sleep(0.1)
 
     def stop(self) -> None:
