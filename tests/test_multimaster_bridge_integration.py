@@ -186,3 +186,15 @@ def test_service_handover_is_make_before_break(bridged):
     time.sleep(0.5)
     call = robot.run(['rosservice', 'call', '/rtt/echo', '{seq: 7}'], 'call')
     assert call.wait(30) == 0, 'the service vanished when the old provider stopped'
+
+
+def test_a_subscriber_hears_the_publishers_of_both_hosts(bridged):
+    tb, robot, cloud, _ = bridged
+    robot.run(['rostopic', 'pub', '-r', '10', '/chatter', 'std_msgs/String', 'data: robot-side'], 'pub_robot')
+    cloud.run(['rostopic', 'pub', '-r', '10', '/chatter', 'std_msgs/String', 'data: cloud-side'], 'pub_cloud')
+    wait_for(lambda: len(publishers(robot, '/chatter')) == 2 and len(publishers(cloud, '/chatter')) == 2, 20,
+             'both publishers on both masters')
+    for side in (robot, cloud):
+        echo = side.run(['rostopic', 'echo', '/chatter'], f'echo_{side.side}')
+        wait_for(lambda: lines(echo, 'robot-side') >= 3 and lines(echo, 'cloud-side') >= 3, 20,
+                 f'the {side.side} subscriber to hear both publishers')

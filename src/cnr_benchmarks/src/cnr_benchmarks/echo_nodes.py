@@ -24,14 +24,14 @@ from std_msgs.msg import Header
 
 from cnr_msgs.srv import Echo, EchoResponse
 from cnr_params import exit_on_config_error
-from cnr_params.ros import private_section
+from cnr_params.ros import init_node, private_section
 
 MODES = ('topic', 'service', 'service_persistent')
 
 
 @exit_on_config_error
 def monitor_main() -> None:
-    rospy.init_node('echo_monitor')
+    init_node('echo_monitor')
     pong = rospy.Publisher('rtt/pong', Header, queue_size=10, tcp_nodelay=True)
     rospy.Subscriber('rtt/ping', Header, pong.publish, queue_size=10, tcp_nodelay=True)
     rospy.Service('rtt/echo', Echo, lambda req: EchoResponse(seq=req.seq, stamp=req.stamp))
@@ -65,7 +65,7 @@ class _TopicProbe:
 
 @exit_on_config_error
 def client_main() -> None:
-    rospy.init_node('echo_client')
+    init_node('echo_client')
     p = private_section('~')
     mode = p.string('mode', 'topic', choices=MODES)
     samples = p.integer('samples', 20, minimum=1)

@@ -24,6 +24,7 @@ from nav_msgs.srv import GetPlan, GetPlanResponse
 from std_srvs.srv import Empty, EmptyResponse
 
 import cnr_params
+from cnr_params.ros import init_node
 from cnr_navigation.cfg import DWAPlannerConfig, MoveBaseConfig
 from cnr_navigation.core.dwa import DWAController
 from cnr_navigation.core.geometry import IDENTITY, Pose2D
@@ -410,12 +411,17 @@ class MoveBaseNode:
 
 @cnr_params.exit_on_config_error
 def main() -> None:
-    rospy.init_node('move_base')
-    reader = RosParamReader()
-    params = read_navigation_params(reader, rospy.get_name())
-    for warning in params.warnings:
-        rospy.logwarn(warning)
-    node = MoveBaseNode(params)
+    init_node('move_base')
+    try:
+        reader = RosParamReader()
+        params = read_navigation_params(reader, rospy.get_name())
+        for warning in params.warnings:
+            rospy.logwarn(warning)
+        node = MoveBaseNode(params)
+    except Exception:                 # stopped (Ctrl-C) while starting: rospy calls fail, that is no error
+        if rospy.is_shutdown():
+            return
+        raise
     calls = dict(reader.calls)
     rospy.loginfo(f'move_base ready: {sum(calls.values())} parameter calls before the reconfigure servers '
                   f'({", ".join(f"{k} {v}" for k, v in sorted(calls.items()))}); controller '

@@ -14,3 +14,22 @@ def private_section(namespace: str = '~') -> Section:
     resolved = rospy.resolve_name(namespace)
     data = rospy.get_param(namespace, {})
     return Section(data if isinstance(data, dict) else {}, resolved.rstrip('/') or '/')
+
+
+def init_node(name: str, **kwargs) -> None:
+    """``rospy.init_node`` with SIGINT/SIGTERM handled off the main thread.
+
+    rospy's own handler runs the shutdown (unregistering from the master) inside the signal handler, on the
+    main thread. If the signal lands while that thread is in a master call, rospy's master proxy lock is
+    already held and the node deadlocks until SIGKILL (seen with move_base stopped during its start-up over a
+    slow link). Here the handler only starts a thread that calls ``rospy.signal_shutdown``.
+    """
+    import signal
+    import threading
+    rospy.init_node(name, disable_signals=True, **kwargs)
+
+    def handler(signum, _frame) -> None:
+        threading.Thread(target=rospy.signal_shutdown, args=(f'signal {signum}',), daemon=True).start()
+
+    signal.signal(signal.SIGINT, handler)
+    signal.signal(signal.SIGTERM, handler)

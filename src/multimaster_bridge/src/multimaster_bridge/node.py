@@ -17,7 +17,7 @@ import rospy
 
 from cnr_msgs.msg import LinkQuality
 from cnr_params import exit_on_config_error
-from cnr_params.ros import private_section
+from cnr_params.ros import init_node, private_section
 from multimaster_bridge.core import config as bridge_config
 from multimaster_bridge.core import protocol, sync
 from multimaster_bridge.core.heartbeat import LinkEstimator
@@ -392,7 +392,7 @@ class Bridge:
 
 @exit_on_config_error
 def main() -> None:
-    rospy.init_node('bridge')
+    init_node('bridge')
     cfg = bridge_config.parse(private_section('~'))
     try:
         bridge = Bridge(cfg, rosgraph.get_master_uri(), rospy.get_name())
