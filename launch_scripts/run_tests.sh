@@ -6,7 +6,7 @@
 # Integration tests start their own rosmaster on a free port (never 11311) and stop everything they start.
 set -euo pipefail
 WS="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-case "${1:-}" in -h|--help) sed -n '2,6p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;; esac
+case "${1:-}" in -h|--help) awk 'NR>1 && /^#/ {sub(/^# ?/, ""); print; next} NR>1 {exit}' "$0"; exit 0 ;; esac
 "$WS/launch_scripts/setup.sh"
 set +u; source "$WS/devel/setup.bash"; set -u
 cd "$WS"
