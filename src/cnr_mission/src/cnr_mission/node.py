@@ -21,7 +21,7 @@ import cnr_params
 from cnr_mission.core.report import CellSummary, Record, path_length, render_png, write_summary, write_tsv
 from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, SearchState
 from cnr_msgs.srv import GetMeasurements
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
 
 
 class MissionMonitor:
@@ -161,7 +161,7 @@ class MissionMonitor:
 
 @cnr_params.exit_on_config_error
 def main() -> None:
-    init_node('mission_monitor')
+    rospy.init_node('mission_monitor')
     mon = MissionMonitor()
     found = mon.wait()
     if rospy.is_shutdown():

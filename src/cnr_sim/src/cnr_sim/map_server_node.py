@@ -7,7 +7,6 @@ from __future__ import annotations
 import sys
 
 import rospy
-from cnr_params.ros import init_node
 from geometry_msgs.msg import Pose
 from nav_msgs.msg import MapMetaData, OccupancyGrid
 from nav_msgs.srv import GetMap, GetMapResponse
@@ -37,7 +36,7 @@ def occupancy_grid(grid: OccupancyMap, frame_id: str, stamp) -> OccupancyGrid:
 @cnr_params.exit_on_config_error
 def main() -> None:
     argv = rospy.myargv(sys.argv)
-    init_node('map_server')
+    rospy.init_node('map_server')
     path = argv[1] if len(argv) > 1 else rospy.get_param('~map_file', '')
     if not path:
         raise cnr_params.ConfigError(rospy.get_name(), 'map_file', 'no map given (usage: map_server MAP.yaml)')

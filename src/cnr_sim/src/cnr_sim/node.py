@@ -26,7 +26,7 @@ from std_srvs.srv import Empty, EmptyResponse
 import cnr_params
 from cnr_msgs.msg import Collision
 from cnr_msgs.srv import Teleport, TeleportResponse
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
 from cnr_sim.core.battery import BatteryModel, CpuMeter, NetMeter
 from cnr_sim.core.kinematics import Pose2D
 from cnr_sim.core.mapio import load_map
@@ -303,7 +303,7 @@ def _point(x: float, y: float):
 
 @cnr_params.exit_on_config_error
 def main() -> None:
-    init_node('simulator')
+    rospy.init_node('simulator')
     params = read_params(private_section('~'))
     node = SimulatorNode(params)
     node.run()

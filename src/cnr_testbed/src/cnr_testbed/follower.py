@@ -11,10 +11,9 @@ from cnr_testbed.core.config import load_link_map
 
 def follow(testbed, map_path: str) -> None:
     import rospy
-    from cnr_params.ros import init_node
     from nav_msgs.msg import Odometry
     link_map = load_link_map(map_path)
-    init_node('link_map_follower', anonymous=True)
+    rospy.init_node('link_map_follower', anonymous=True)
     state = {'region': None}
 
     def on_pose(msg: Odometry) -> None:

@@ -10,7 +10,7 @@ from geometry_msgs.msg import PoseStamped
 import cnr_params
 from cnr_msgs.msg import CellStates
 from cnr_msgs.srv import NextGoal, NextGoalResponse
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
 from global_goal_manager.core.policies import CellView, make_policy
 
 
@@ -56,7 +56,7 @@ class GoalManagerNode:
 
 @cnr_params.exit_on_config_error
 def main() -> None:
-    init_node('global_goal_manager')
+    rospy.init_node('global_goal_manager')
     p = private_section('~')
     sec = p.section('global_goal_manager', {})
     GoalManagerNode(sec.string('policy', 'least_recently_visited'), p.string('frame_id', 'map'), p.source)

@@ -14,7 +14,7 @@ from cnr_msgs.msg import CellStates, MergedMeasurement
 from cnr_msgs.srv import (GetCell, GetCellResponse, GetCellStates, GetCellStatesResponse, GetMeasurements,
                           GetMeasurementsResponse)
 from cnr_params import Section
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
 from local_mapcell_manager.core.grid import MapcellGrid
 from local_mapcell_manager.core.store import CellBook, Measurement, MeasurementStore
 
@@ -130,6 +130,6 @@ class ManagerNode:
 
 @cnr_params.exit_on_config_error
 def main() -> None:
-    init_node('local_mapcell_manager')
+    rospy.init_node('local_mapcell_manager')
     ManagerNode(read_params(private_section('~')))
     rospy.spin()

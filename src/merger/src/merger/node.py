@@ -14,7 +14,7 @@ from std_msgs.msg import UInt32
 import cnr_params
 from cnr_msgs.msg import MergedMeasurement
 from cnr_params import Section
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
 from merger.core.nearest import NearestMerger
 
 
@@ -93,6 +93,6 @@ class MergerNode:
 
 @cnr_params.exit_on_config_error
 def main() -> None:
-    init_node('merger')
+    rospy.init_node('merger')
     MergerNode(read_params(private_section('~')))
     rospy.spin()

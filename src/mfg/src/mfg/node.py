@@ -21,7 +21,7 @@ import cnr_params
 from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, SearchState
 from cnr_msgs.srv import NextGoal
 from cnr_params import Section
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
 from mfg.core.detector import Detector, DetectorConfig
 from mfg.core.search import HotspotSearch
 
@@ -274,7 +274,7 @@ class MfgNode:
 
 @cnr_params.exit_on_config_error
 def main() -> None:
-    init_node('mfg')
+    rospy.init_node('mfg')
     node = MfgNode(read_params(private_section('~')))
     try:
         node.run()

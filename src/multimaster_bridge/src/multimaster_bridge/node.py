@@ -337,7 +337,11 @@ class Bridge:
             msg.clock_offset = q.clock_offset
             msg.heartbeat_rate = self.cfg.heartbeat_rate
             msg.sent, msg.received = q.sent, q.received
-            self.quality_pub.publish(msg)
+            try:
+                self.quality_pub.publish(msg)
+            except rospy.ROSException:
+                if not rospy.is_shutdown():
+                    raise
 
     def spin(self) -> None:
         threading.Thread(target=self.receive_loop, name='bridge-rx', daemon=True).start()
