@@ -6,7 +6,7 @@ The simulated TurtleBot (simulator + map_server) runs on the robot's master. mov
 started on the cloud host:
 
 * ``SM`` (single master): its ROS_MASTER_URI is the robot's master, across the emulated link, so each of its
-  ~380 parameter reads and ~60 registrations pays the link's round trip (plus a TCP handshake);
+  ~380 parameter calls and ~60 registrations pays the link's round trip, one call after the other;
 * ``MM`` (multi-master): it uses the cloud host's own master; multimaster_bridge (config/bridge_*.yaml allow
   lists) makes its topics and services known on the robot's master.
 
