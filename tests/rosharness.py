@@ -6,12 +6,13 @@ started here runs in its own process group and is stopped (SIGINT, then SIGKILL)
 from __future__ import annotations
 
 import os
-import signal
 import socket
 import subprocess
 import time
 import xmlrpc.client
 from typing import Callable, Dict, List, Optional, Sequence, TypeVar
+
+from cnr_testbed.rosside import stop_process
 
 T = TypeVar('T')
 WS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -56,22 +57,7 @@ class Proc:
             return f.read()
 
     def stop(self, timeout: float = 10.0) -> Optional[int]:
-        if self.popen.poll() is None:
-            for sig, wait in ((signal.SIGINT, timeout), (signal.SIGTERM, 3.0), (signal.SIGKILL, 3.0)):
-                try:
-                    os.killpg(self.popen.pid, sig)
-                except ProcessLookupError:
-                    break
-                try:
-                    self.popen.wait(wait)
-                    break
-                except subprocess.TimeoutExpired:
-                    continue
-        else:   # the leader exited; make sure nothing of its group lingers
-            try:
-                os.killpg(self.popen.pid, signal.SIGKILL)
-            except (ProcessLookupError, PermissionError):
-                pass
+        stop_process(self.popen, timeout)
         self._log.close()
         return self.popen.returncode
 

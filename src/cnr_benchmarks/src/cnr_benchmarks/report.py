@@ -1,7 +1,10 @@
 """Writing benchmark results: TSV rows (appended as they are measured, never truncated), markdown, PNG."""
 from __future__ import annotations
 
+import argparse
 import os
+import sys
+import tempfile
 from typing import Dict, Iterable, List, Sequence
 
 WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
@@ -66,3 +69,53 @@ def group(rows: List[Dict], *keys: str) -> Dict[tuple, List[Dict]]:
     for r in rows:
         out.setdefault(tuple(r[k] for k in keys), []).append(r)
     return out
+
+
+def add_common_arguments(ap: argparse.ArgumentParser, default_rtts: str) -> None:
+    """--rtts, --out and --config of the testbed benchmarks."""
+    ap.add_argument('--rtts', default=default_rtts, help='link RTTs in ms (comma-separated)')
+    ap.add_argument('--out', default=DEFAULT_OUT)
+    ap.add_argument('--config', default=os.path.join(WS, 'config', 'testbed.yaml'))
+
+
+def parse_rtts(prog: str, text: str) -> List[float]:
+    """``'0,20,50'`` -> ``[0.0, 20.0, 50.0]``; a one-line error and exit status 2 otherwise."""
+    try:
+        rtts = [float(x) for x in text.split(',')]
+    except ValueError:
+        rtts = []
+    if not rtts or any(not r >= 0 for r in rtts):
+        print(f'{prog}: --rtts: expected non-negative numbers separated by commas, got {text!r}', file=sys.stderr)
+        raise SystemExit(2)
+    return rtts
+
+
+class BenchRun:
+    """A benchmark on the testbed: parsed RTTs, the TSV log, a work directory with a fresh bridge secret, and
+    the testbed (instance ``cnrbench``) brought up on entry and down on exit, however the run ends."""
+
+    def __init__(self, prog: str, args: argparse.Namespace, tsv_name: str, columns: Sequence[str]) -> None:
+        self.rtts = parse_rtts(prog, args.rtts)
+        from cnr_testbed.api import Testbed
+        self.testbed = Testbed(args.config, {'name': 'cnrbench', 'robot.namespace': 'cnrbench-robot',
+                                             'cloud.namespace': 'cnrbench-cloud'})
+        os.makedirs(args.out, exist_ok=True)
+        self.log = TsvLog(os.path.join(args.out, tsv_name), columns)
+        self.work = tempfile.mkdtemp(prefix=f'{prog}-')
+        self.secret = os.path.join(self.work, 'secret')
+        with open(self.secret, 'w') as f:
+            f.write(os.urandom(16).hex())
+
+    def __enter__(self) -> 'BenchRun':
+        try:
+            self.testbed.up()
+        except BaseException:
+            self.log.close()
+            raise
+        return self
+
+    def __exit__(self, *exc) -> None:
+        try:
+            self.testbed.down()
+        finally:
+            self.log.close()

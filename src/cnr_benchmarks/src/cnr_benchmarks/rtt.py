@@ -19,8 +19,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import tempfile
-import time
 from typing import Dict, List
 
 from cnr_benchmarks import report
@@ -49,7 +47,7 @@ BRIDGE_SETTINGS = dict(allow_topics=['/rtt/*'], allow_services=['/rtt/*'])
 
 def run_placement(tb, name: str, rtts: List[float], samples: int, interval: float, log: report.TsvLog,
                   work: str, secret: str) -> List[Dict]:
-    from cnr_testbed.rosside import RosSide, start_bridge
+    from cnr_testbed.rosside import RosSide, start_bridge, wait_until
     masters, client_master, monitor_host, monitor_master = PLACEMENTS[name]
     port = 11411
     sides = {m: RosSide(tb, m, m, port, log_dir=work) for m in masters}
@@ -64,11 +62,8 @@ def run_placement(tb, name: str, rtts: List[float], samples: int, interval: floa
             start_bridge(sides['robot'], sides['cloud'], secret, **BRIDGE_SETTINGS)
             start_bridge(sides['cloud'], sides['robot'], secret, **BRIDGE_SETTINGS)
         mon = monitor.run(['rosrun', 'cnr_benchmarks', 'echo_monitor'], f'monitor_{name}')
-        deadline = time.monotonic() + 60
-        while '/rtt/echo' not in {s for s, _ in sides[client_master].call('getSystemState')[2]}:
-            if mon.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f'{name}: echo_monitor not reachable from the client (see {mon.log_path})')
-            time.sleep(0.1)
+        wait_until(lambda: '/rtt/echo' in {s for s, _ in sides[client_master].call('getSystemState')[2]}, 60,
+                   f'{name}: echo_monitor reachable from the client', mon)
         for rtt in rtts:
             tb.set('both', delay=rtt / 2.0)
             for mode in MODES:
@@ -170,43 +165,25 @@ def write_outputs(rows: List[Dict], rtts: List[float], out_dir: str) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description='Thesis Table 4-1: topic and service RTT by node placement and delay.')
-    ap.add_argument('--rtts', default='0,20,50,100', help='link RTTs in ms (comma-separated)')
+    report.add_common_arguments(ap, '0,20,50,100')
     ap.add_argument('--samples', type=int, default=20)
     ap.add_argument('--interval', type=float, default=0.25, help='seconds between probes')
     ap.add_argument('--placements', default=','.join(PLACEMENTS))
-    ap.add_argument('--out', default=report.DEFAULT_OUT)
-    ap.add_argument('--config', default=os.path.join(report.WS, 'config', 'testbed.yaml'))
     args = ap.parse_args(argv)
-    try:
-        rtts = [float(x) for x in args.rtts.split(',')]
-    except ValueError:
-        print(f'bench_rtt: --rtts: expected numbers, got {args.rtts!r}', file=sys.stderr)
-        return 2
     placements = args.placements.split(',')
     bad = [p for p in placements if p not in PLACEMENTS]
-    if bad or any(r < 0 for r in rtts) or args.samples < 2:
-        print(f'bench_rtt: bad arguments: placements {bad}, rtts {rtts}, samples {args.samples}', file=sys.stderr)
+    if bad or args.samples < 2:
+        print(f'bench_rtt: bad arguments: unknown placements {bad} or --samples {args.samples} < 2', file=sys.stderr)
         return 2
-    from cnr_testbed.api import Testbed
-    os.makedirs(args.out, exist_ok=True)
-    log = report.TsvLog(os.path.join(args.out, 'rtt.tsv'), ['placement', 'link_rtt_ms', 'mode', 'sample', 'rtt_ms'])
-    work = tempfile.mkdtemp(prefix='bench_rtt-')
-    secret = os.path.join(work, 'secret')
-    with open(secret, 'w') as f:
-        f.write(os.urandom(16).hex())
     rows: List[Dict] = []
-    tb = Testbed(args.config, {'name': 'cnrbench', 'robot.namespace': 'cnrbench-robot',
-                               'cloud.namespace': 'cnrbench-cloud'})
-    tb.up()
-    try:
+    with report.BenchRun('bench_rtt', args, 'rtt.tsv',
+                         ['placement', 'link_rtt_ms', 'mode', 'sample', 'rtt_ms']) as run:
         for p in placements:
             report.progress(f'placement {p}')
-            rows += run_placement(tb, p, rtts, args.samples, args.interval, log, work, secret)
-    finally:
-        tb.down()
-        log.close()
-    print(write_outputs(rows, rtts, args.out))
-    print(f'wrote {log.path}, {args.out}/rtt.md, {args.out}/rtt.png (node logs in {work})')
+            rows += run_placement(run.testbed, p, run.rtts, args.samples, args.interval, run.log, run.work,
+                                  run.secret)
+    print(write_outputs(rows, run.rtts, args.out))
+    print(f'wrote {run.log.path}, {args.out}/rtt.md, {args.out}/rtt.png (node logs in {run.work})')
     return 0
 
 

@@ -20,7 +20,6 @@ from __future__ import annotations
 import argparse
 import os
 import sys
-import tempfile
 import time
 import xmlrpc.client
 from typing import Dict, List
@@ -29,6 +28,7 @@ import yaml
 
 from cnr_benchmarks import report
 from cnr_benchmarks.core.stats import summarize
+from cnr_testbed.rosside import wait_until
 
 # thesis Appendix III, averages in ms (5 runs each); std.dev where Table 4-2 gives it
 THESIS_SM = {0: 13414.0, 20: 45332.0, 50: 95688.0, 100: 174452.0, 120: 200556.0, 140: 230206.0}
@@ -51,6 +51,10 @@ def action_ready(side, node: str) -> bool:
     pubs, subs = dict(pubs), dict(subs)
     return (all(node in pubs.get(f'/move_base/{t}', []) for t in ACTION_PUBS)
             and all(node in subs.get(f'/move_base/{t}', []) for t in ACTION_SUBS))
+
+
+def publishes_clock(side) -> bool:
+    return '/clock' in {t for t, _ in side.call('getSystemState')[0]}
 
 
 def node_gone(side, node: str) -> bool:
@@ -106,22 +110,14 @@ class Setup:
         self.cloud = RosSide(tb, 'cloud', 'robot' if mode == 'SM' else 'cloud', 11411, log_dir=work)
         self.robot.start_master(use_sim_time=True)
         sim = self.robot.run(['roslaunch', 'cnr_sim', 'simulator.launch', 'real_time_factor:=1'], 'simulator')
-        deadline = time.monotonic() + 60
-        while '/clock' not in {t for t, _ in self.robot.call('getSystemState')[0]}:
-            if sim.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f'the simulator did not start (see {sim.log_path})')
-            time.sleep(0.1)
+        wait_until(lambda: publishes_clock(self.robot), 60, 'the simulator', sim)
         self.node = '/move_base'
         if mode == 'MM':
             self.cloud_master.start_master(use_sim_time=True)
             start_bridge(self.robot, self.cloud_master, secret, **_bridge_settings())
             start_bridge(self.cloud_master, self.robot, secret, **_bridge_settings())
             self.node = '/cloud/move_base'
-            deadline = time.monotonic() + 60
-            while '/clock' not in {t for t, _ in self.cloud_master.call('getSystemState')[0]}:
-                if time.monotonic() > deadline:
-                    raise RuntimeError('the bridges did not sync /clock to the cloud master')
-                time.sleep(0.1)
+            wait_until(lambda: publishes_clock(self.cloud_master), 60, 'the bridges to sync /clock to the cloud')
 
     @property
     def nav_master(self):
@@ -132,12 +128,8 @@ class Setup:
         t0 = time.monotonic()
         proc = self.cloud.run(MOVE_BASE, f'move_base_{self.mode}')
         try:
-            while not action_ready(self.robot, self.node):
-                if proc.poll() is not None:
-                    raise RuntimeError(f'move_base exited with {proc.returncode} (see {proc.log_path})')
-                if time.monotonic() - t0 > timeout:
-                    raise RuntimeError(f'move_base not ready after {timeout:.0f} s (see {proc.log_path})')
-                time.sleep(0.02)
+            wait_until(lambda: action_ready(self.robot, self.node), timeout, 'the move_base action server', proc,
+                       interval=0.02)
             return time.monotonic() - t0
         finally:
             t_stop = time.monotonic()
@@ -148,12 +140,9 @@ class Setup:
             if stale:
                 report.progress(f'    (removed {stale} registrations the stopped move_base left behind; it took '
                                 f'{self.last_stop[0]:.1f} s to stop, exit status {self.last_stop[1]})')
-            deadline = time.monotonic() + 60
-            while not (node_gone(self.robot, self.node)
-                       and (self.cloud_master is None or node_gone(self.cloud_master, '/move_base'))):
-                if time.monotonic() > deadline:
-                    raise RuntimeError(f'{self.node} still registered 60 s after it stopped')
-                time.sleep(0.1)
+            wait_until(lambda: node_gone(self.robot, self.node) and (
+                self.cloud_master is None or node_gone(self.cloud_master, '/move_base')), 60,
+                f'{self.node} to leave the masters after it stopped', interval=0.1)
 
     def stop(self) -> None:
         for side in (self.cloud, self.cloud_master, self.robot):
@@ -226,41 +215,25 @@ def write_outputs(rows: List[Dict], rtts: List[float], out_dir: str) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description='Thesis Table 4-2: move_base start-up on the cloud, SM vs MM.')
-    ap.add_argument('--rtts', default='0,20,50,100,120,140', help='link RTTs in ms (comma-separated)')
+    report.add_common_arguments(ap, '0,20,50,100,120,140')
     ap.add_argument('--runs', type=int, default=5)
     ap.add_argument('--modes', default='SM,MM')
     ap.add_argument('--timeout', type=float, default=900.0, help='seconds per run before giving up')
-    ap.add_argument('--out', default=report.DEFAULT_OUT)
-    ap.add_argument('--config', default=os.path.join(report.WS, 'config', 'testbed.yaml'))
     args = ap.parse_args(argv)
-    try:
-        rtts = [float(x) for x in args.rtts.split(',')]
-    except ValueError:
-        print(f'bench_startup: --rtts: expected numbers, got {args.rtts!r}', file=sys.stderr)
-        return 2
     modes = args.modes.split(',')
-    if any(m not in ('SM', 'MM') for m in modes) or args.runs < 1 or any(r < 0 for r in rtts):
-        print(f'bench_startup: bad arguments: modes {modes} (SM, MM), runs {args.runs}, rtts {rtts}',
+    if any(m not in ('SM', 'MM') for m in modes) or args.runs < 1:
+        print(f'bench_startup: bad arguments: --modes {args.modes} (SM, MM) or --runs {args.runs} < 1',
               file=sys.stderr)
         return 2
-    from cnr_testbed.api import Testbed
-    os.makedirs(args.out, exist_ok=True)
-    log = report.TsvLog(os.path.join(args.out, 'startup.tsv'), ['mode', 'link_rtt_ms', 'run', 'startup_ms'])
-    work = tempfile.mkdtemp(prefix='bench_startup-')
-    secret = os.path.join(work, 'secret')
-    with open(secret, 'w') as f:
-        f.write(os.urandom(16).hex())
     rows: List[Dict] = []
-    tb = Testbed(args.config, {'name': 'cnrbench', 'robot.namespace': 'cnrbench-robot',
-                               'cloud.namespace': 'cnrbench-cloud'})
-    tb.up()
-    try:
+    with report.BenchRun('bench_startup', args, 'startup.tsv', ['mode', 'link_rtt_ms', 'run', 'startup_ms']) as bench:
+        tb = bench.testbed
         for mode in modes:
             report.progress(f'{mode}: bringing up masters, simulator' + (' and bridges' if mode == 'MM' else ''))
             tb.set('both', delay=0.0, jitter=0.0, loss=0.0, outage=False)
-            setup = Setup(tb, mode, work, secret)
+            setup = Setup(tb, mode, bench.work, bench.secret)
             try:
-                for r in rtts:
+                for r in bench.rtts:
                     tb.set('both', delay=r / 2.0)
                     for run in range(1, args.runs + 1):
                         try:
@@ -268,16 +241,13 @@ def main(argv=None) -> int:
                         except RuntimeError as exc:
                             report.progress(f'  {mode} {r:5.0f} ms run {run}: FAILED: {exc}')
                             continue
-                        log.row(mode=mode, link_rtt_ms=r, run=run, startup_ms=t)
+                        bench.log.row(mode=mode, link_rtt_ms=r, run=run, startup_ms=t)
                         rows.append(dict(mode=mode, link_rtt_ms=r, run=run, startup_ms=t))
                         report.progress(f'  {mode} {r:5.0f} ms run {run}/{args.runs}: {t:9.0f} ms')
             finally:
                 setup.stop()
-    finally:
-        tb.down()
-        log.close()
-    print(write_outputs(rows, rtts, args.out))
-    print(f'wrote {log.path}, {args.out}/startup.md, {args.out}/startup.png (node logs in {work})')
+    print(write_outputs(rows, bench.rtts, args.out))
+    print(f'wrote {bench.log.path}, {args.out}/startup.md, {args.out}/startup.png (node logs in {bench.work})')
     return 0
 
 

@@ -20,7 +20,7 @@ import subprocess
 import tempfile
 import time
 import xmlrpc.client
-from typing import Dict, List, Optional, Sequence
+from typing import Callable, Dict, List, Optional, Sequence
 
 import yaml
 
@@ -28,6 +28,23 @@ from cnr_testbed import netns
 from cnr_testbed.api import Testbed
 
 BRIDGE_PORT = 11511
+
+
+def wait_until(condition: Callable[[], bool], timeout: float, what: str,
+               proc: Optional[subprocess.Popen] = None, interval: float = 0.05) -> float:
+    """Poll ``condition`` until true; returns the seconds waited.
+
+    Raises RuntimeError naming ``what`` after ``timeout`` s, or at once if ``proc`` exits first.
+    """
+    start = time.monotonic()
+    while not condition():
+        if proc is not None and proc.poll() is not None:
+            raise RuntimeError(f'{what}: process exited with {proc.returncode} '
+                               f'(see {getattr(proc, "log_path", "its output")})')
+        if time.monotonic() - start > timeout:
+            raise RuntimeError(f'timed out after {timeout:.0f} s waiting for {what}')
+        time.sleep(interval)
+    return time.monotonic() - start
 
 
 def stop_process(proc: subprocess.Popen, timeout: float = 10.0) -> Optional[int]:
@@ -92,11 +109,7 @@ class RosSide:
 
     def start_master(self, use_sim_time: bool = False, timeout: float = 20.0) -> None:
         self.master = self.run(['rosmaster', '--core', '-p', str(self.port)], 'rosmaster')
-        deadline = time.monotonic() + timeout
-        while not self.master_up():
-            if self.master.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f'rosmaster of {self.side} did not start (see {self.master.log_path})')
-            time.sleep(0.05)
+        wait_until(self.master_up, timeout, f'the rosmaster of {self.side}', self.master)
         self.call('setParam', '/use_sim_time', use_sim_time)
 
     def call(self, method: str, *args):
