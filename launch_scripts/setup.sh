@@ -18,19 +18,33 @@ for arg in "$@"; do
   esac
 done
 
-# Debian 12 packages: ROS 1 from Debian, message packages, and the Python libraries (built for /usr/bin/python3).
+# Debian 12 packages, complete without Recommends (checked in a pristine Debian 12 root file system by
+# ../shared/tools/fresh-machine-check, which .ci/run runs). Grouped by why they are needed.
 PKGS=(
-  ros-core catkin ros-message-generation python3-catkin-pkg python3-genmsg python3-genpy
-  python3-rospy python3-rostest python3-roslaunch python3-rosnode python3-rostopic python3-rosservice
-  python3-rosparam python3-rosmsg python3-rosgraph python3-rosbag
-  python3-actionlib python3-tf2-ros python3-dynamic-reconfigure libdynamic-reconfigure-config-init-mutex-dev
-  python3-message-filters python3-map-msgs
-  libstd-msgs-dev libgeometry-msgs-dev libsensor-msgs-dev libnav-msgs-dev libactionlib-msgs-dev
-  libmove-base-msgs-dev libtf2-msgs-dev
-  python3-std-msgs python3-geometry-msgs python3-sensor-msgs python3-nav-msgs python3-std-srvs
-  python3-move-base-msgs python3-actionlib-msgs python3-tf2-msgs python3-rosgraph-msgs
-  python3-numpy python3-numba python3-scipy python3-skimage python3-yaml python3-psutil python3-pil
-  python3-matplotlib python3-pytest python3-pytest-timeout python3-serial python3-pyroute2 python3-sklearn iproute2 iputils-ping iperf3
+  # build: catkin_make runs CMake, whose project() needs a C++ compiler and make even for Python packages
+  catkin make g++ catkin-lint
+  # ROS 1 tools: master, roslaunch, rostopic/rosservice/rosnode/rosparam/rosbag (ros-core), rosrun (rosbash,
+  # only recommended by ros-core), message generation and runtime, rostest
+  ros-core rosbash ros-message-generation ros-message-runtime python3-rostest
+  # the Python client libraries our nodes import
+  python3-rospy python3-roslaunch python3-rosgraph python3-actionlib python3-tf2-ros python3-message-filters
+  python3-dynamic-reconfigure libdynamic-reconfigure-config-init-mutex-dev
+  # messages: Debian splits each into the definitions (ros-*, the .msg files genmsg reads), the CMake
+  # config (lib*-dev, for find_package) and the generated Python (python3-*)
+  ros-std-msgs libstd-msgs-dev python3-std-msgs
+  ros-std-srvs libstd-srvs-dev python3-std-srvs
+  ros-geometry-msgs libgeometry-msgs-dev python3-geometry-msgs
+  ros-sensor-msgs libsensor-msgs-dev python3-sensor-msgs
+  ros-nav-msgs libnav-msgs-dev python3-nav-msgs
+  ros-actionlib-msgs libactionlib-msgs-dev python3-actionlib-msgs
+  ros-move-base-msgs libmove-base-msgs-dev python3-move-base-msgs
+  ros-tf2-msgs libtf2-msgs-dev python3-tf2-msgs
+  ros-rosgraph-msgs python3-rosgraph-msgs python3-map-msgs
+  # Python libraries (Debian's, built for /usr/bin/python3)
+  python3-numpy python3-numba python3-scipy python3-skimage python3-sklearn python3-yaml python3-psutil
+  python3-pil python3-matplotlib python3-serial python3-pyroute2 python3-pytest python3-pytest-timeout
+  # the testbed: network namespaces, ping, iperf3; pgrep
+  iproute2 iputils-ping iperf3 procps
 )
 
 if [ "$install" = 1 ]; then
