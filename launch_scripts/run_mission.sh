@@ -56,13 +56,19 @@ cnr_master_up && cnr_die "a master already runs at $ROS_MASTER_URI; stop it or c
 cnr_ensure_master
 cnr_log "scenario $name ($scenario_file), real-time factor $rtf, report in $report"
 set +e
-roslaunch cnr_mission mission.launch scenario_file:="$scenario_file" map:="$map" x:="$x" y:="$y" a:="$a" \
+# cnr_launch: roslaunch that ends at once with exit 2 when a node reports a configuration error, and ends
+# quietly when the mission monitor is done (its exit status: 0 hotspot found, 3 not found)
+rosrun cnr_bringup cnr_launch --until mission_monitor cnr_mission mission.launch monitor_required:=false \
+  scenario_file:="$scenario_file" map:="$map" x:="$x" y:="$y" a:="$a" \
   real_time_factor:="$rtf" report_dir:="$report" store:="$report/store.tsv" 2>&1 \
   | grep --line-buffered -v -e '^ \* /' -e '^\s*$' -e 'rosdep view is empty'
+status=${PIPESTATUS[0]}
 set -e
+[ "$status" = 2 ] && { cnr_log "stopped: a node reported a configuration error (above)"; exit 2; }
+[ "$status" = 130 ] && { cnr_log "interrupted"; exit 130; }
 found=$(/usr/bin/python3 -c "import json,sys; print(json.load(open(sys.argv[1])).get('found'))" "$report/summary.json" 2>/dev/null || echo missing)
 case "$found" in
   True) cnr_log "hotspot found; report: $report"; exit 0 ;;
   False) cnr_log "no hotspot found; report: $report"; exit 3 ;;
-  *) cnr_log "the mission ended without a report (see ~/.ros/log/latest)"; exit 1 ;;
+  *) cnr_log "the mission ended without a report (launch exit status $status; see ~/.ros/log/latest)"; exit 1 ;;
 esac

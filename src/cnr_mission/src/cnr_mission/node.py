@@ -56,7 +56,10 @@ class MissionMonitor:
 
     def _say(self, text: str) -> None:
         t = rospy.Time.now().to_sec() - (self.start_sim or rospy.Time.now().to_sec())
-        print(f'[mission {t:7.1f} s] {text}', flush=True)
+        # one write per line: print() writes the text and the newline separately, and another thread's
+        # output (rospy's log lines) can land between them
+        sys.stdout.write(f'[mission {t:7.1f} s] {text}\n')
+        sys.stdout.flush()
 
     def _on_pose(self, msg: Odometry) -> None:
         p = msg.pose.pose.position

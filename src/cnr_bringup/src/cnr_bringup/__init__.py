@@ -1,0 +1,1 @@
+"""Bring-up of the simulated TurtleBot 2 and the launcher the workspace's scripts use (``cnr_launch``)."""
