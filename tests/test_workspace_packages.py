@@ -1,0 +1,107 @@
+"""The catkin packages as a whole: every dependency declared, lint-clean, the brain independent of the body.
+
+No master needed: these read package.xml, the Python sources and the launch files, and run catkin_lint.
+"""
+from __future__ import annotations
+
+import ast
+import os
+import re
+import shutil
+import subprocess
+import xml.etree.ElementTree as ET
+from typing import Dict, Set
+
+import pytest
+
+WS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SRC = os.path.join(WS, 'src')
+
+# ROS packages whose Python module has the package's name (the message packages are matched by suffix)
+ROS_PYTHON_PACKAGES = {'rospy', 'actionlib', 'tf2_ros', 'dynamic_reconfigure', 'message_filters', 'roslaunch',
+                       'rosgraph', 'rostest', 'rosnode', 'rostopic', 'rosservice', 'rosparam', 'rosbag'}
+# the monitoring robot's brain: it must run on any body, so it never imports the simulator
+BRAIN = {'kestrel_driver', 'merger', 'local_mapcell_manager', 'global_goal_manager', 'mfg', 'cnr_mission'}
+
+
+def _packages() -> Dict[str, str]:
+    out = {}
+    for name in sorted(os.listdir(SRC)):
+        if os.path.isfile(os.path.join(SRC, name, 'package.xml')):
+            out[name] = os.path.join(SRC, name)
+    return out
+
+
+PACKAGES = _packages()
+
+
+def _declared(pkg_dir: str) -> Set[str]:
+    root = ET.parse(os.path.join(pkg_dir, 'package.xml')).getroot()
+    tags = ('depend', 'exec_depend', 'build_export_depend', 'build_depend', 'test_depend')
+    return {e.text.strip() for t in tags for e in root.findall(t) if e.text}
+
+
+def _python_imports(pkg_dir: str) -> Dict[str, str]:
+    """Top-level module -> first file importing it, over the package's src/, nodes/, scripts/."""
+    found: Dict[str, str] = {}
+    for sub in ('src', 'nodes', 'scripts'):
+        for dirpath, _dirs, files in os.walk(os.path.join(pkg_dir, sub)):
+            for f in files:
+                path = os.path.join(dirpath, f)
+                if not (f.endswith('.py') or (sub in ('nodes', 'scripts') and '.' not in f)):
+                    continue
+                with open(path, encoding='utf-8') as stream:
+                    tree = ast.parse(stream.read(), path)
+                for node in ast.walk(tree):
+                    names = []
+                    if isinstance(node, ast.Import):
+                        names = [a.name for a in node.names]
+                    elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                        names = [node.module]
+                    for n in names:
+                        found.setdefault(n.split('.')[0], os.path.relpath(path, WS))
+    return found
+
+
+def _launch_references(pkg_dir: str) -> Dict[str, str]:
+    found: Dict[str, str] = {}
+    launch_dir = os.path.join(pkg_dir, 'launch')
+    if not os.path.isdir(launch_dir):
+        return found
+    for f in os.listdir(launch_dir):
+        path = os.path.join(launch_dir, f)
+        with open(path, encoding='utf-8') as stream:
+            text = stream.read()
+        for name in re.findall(r'\$\(find ([A-Za-z0-9_]+)\)', text) + re.findall(r'pkg="([A-Za-z0-9_]+)"', text):
+            found.setdefault(name, os.path.relpath(path, WS))
+    return found
+
+
+def _is_ros_dependency(module: str) -> bool:
+    return module in PACKAGES or module in ROS_PYTHON_PACKAGES or module.endswith(('_msgs', '_srvs'))
+
+
+@pytest.mark.parametrize('pkg', sorted(PACKAGES))
+def test_every_dependency_is_declared(pkg: str) -> None:
+    pkg_dir = PACKAGES[pkg]
+    declared = _declared(pkg_dir)
+    used = {m: where for m, where in _python_imports(pkg_dir).items() if _is_ros_dependency(m)}
+    used.update(_launch_references(pkg_dir))
+    missing = {m: where for m, where in used.items() if m != pkg and m not in declared}
+    assert not missing, f'{pkg}/package.xml lacks dependencies used here: {missing}'
+
+
+@pytest.mark.parametrize('pkg', sorted(BRAIN & set(PACKAGES)))
+def test_the_brain_never_imports_the_simulator(pkg: str) -> None:
+    imports = _python_imports(PACKAGES[pkg])
+    assert 'cnr_sim' not in imports, f'{imports["cnr_sim"]} imports cnr_sim'
+    assert 'cnr_sim' not in _declared(PACKAGES[pkg])
+
+
+def test_catkin_lint_reports_no_errors_or_warnings() -> None:
+    """catkin_lint -W1 (errors and warnings); a check switched off in a CMakeLists says why in a comment."""
+    exe = shutil.which('catkin_lint')
+    assert exe, 'catkin_lint is missing (Debian package catkin-lint; launch_scripts/setup.sh installs it)'
+    r = subprocess.run([exe, '-W1', '--strict', SRC], capture_output=True, text=True, timeout=120)
+    problems = [line for line in (r.stdout + r.stderr).splitlines() if ': error:' in line or ': warning:' in line]
+    assert r.returncode == 0 and not problems, '\n'.join(problems) or r.stderr
