@@ -27,10 +27,11 @@ class MergerParams:
 
 
 def read_params(p: Section) -> MergerParams:
-    return MergerParams(tolerance=p.number('tolerance', 0.1, positive=True),
-                        max_wait=p.number('max_wait', 0.5, positive=True),
-                        pose_horizon=p.number('pose_horizon', 10.0, positive=True),
-                        pose_topic=p.string('pose_topic', 'base_pose_ground_truth'))
+    """No defaults in code: they live in config/merger.yaml."""
+    return MergerParams(tolerance=p.number('tolerance', positive=True),
+                        max_wait=p.number('max_wait', positive=True),
+                        pose_horizon=p.number('pose_horizon', positive=True),
+                        pose_topic=p.string('pose_topic'))
 
 
 def _yaw(q) -> float:
@@ -84,6 +85,7 @@ class MergerNode:
             out.x, out.y, out.yaw = m.pose
             out.temperature = m.measurement
             out.stamp_difference = m.difference
+            out.cell = -1                   # the merger does not know the grid: local_mapcell_manager assigns it
             self.pub.publish(out)
         if dropped:
             self.dropped_pub.publish(UInt32(stats.dropped_no_pose))
