@@ -12,6 +12,7 @@ from sensor_msgs.msg import Temperature
 from std_msgs.msg import UInt32
 
 import cnr_params
+from cnr_maps.pose import quaternion_to_yaw
 from cnr_msgs.msg import MergedMeasurement
 from cnr_params import Section
 from cnr_params.ros import private_section
@@ -32,10 +33,6 @@ def read_params(p: Section) -> MergerParams:
                         max_wait=p.number('max_wait', positive=True),
                         pose_horizon=p.number('pose_horizon', positive=True),
                         pose_topic=p.string('pose_topic'))
-
-
-def _yaw(q) -> float:
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
 
 
 class MergerNode:
@@ -60,8 +57,10 @@ class MergerNode:
             rospy.logwarn_throttle(5.0, 'ignored a pose with non-finite values')
             return
         self.frame = msg.header.frame_id or self.frame
+        q = p.orientation
+        yaw = quaternion_to_yaw((q.x, q.y, q.z, q.w))
         with self.lock:
-            self.core.add_pose(msg.header.stamp.to_sec(), (p.position.x, p.position.y, _yaw(p.orientation)))
+            self.core.add_pose(msg.header.stamp.to_sec(), (p.position.x, p.position.y, yaw))
         self._flush()
 
     def _on_temperature(self, msg: Temperature) -> None:
