@@ -6,9 +6,10 @@ import pytest
 
 from cnr_params import ConfigError, Section
 from cnr_sim.core.battery import BatteryConfig, BatteryModel, CpuMeter
-from cnr_sim.core.kinematics import BaseLimits, DiffDrive, Pose2D, integrate
+from cnr_maps.pose import Pose2D
+from cnr_sim.core.kinematics import BaseLimits, DiffDrive, integrate
 from cnr_sim.core.laser import FakeLaser, LaserConfig
-from cnr_sim.core.mapio import OccupancyMap
+from cnr_maps.mapio import OccupancyMap
 from cnr_sim.core.obstacles import MovingObstacle, obstacles_from_config
 from cnr_sim.core.raycast import cast_rays, circle_hits
 from cnr_sim.core.world import World, WorldConfig

@@ -19,13 +19,20 @@ def open_pty():
     return master, os.ttyname(slave), slave
 
 
-def test_device_mode_over_a_pty(ros, tmp_path):
+def load_defaults(ros, workspace, namespace):
+    """config/kestrel_driver.yaml into the node's namespace, as mission.launch does (no defaults in code)."""
+    subprocess.run(['rosparam', 'load', os.path.join(workspace, 'config', 'kestrel_driver.yaml'), namespace],
+                   env=ros.master.env, check=True, capture_output=True, timeout=30)
+
+
+def test_device_mode_over_a_pty(ros, workspace, tmp_path):
     from sensor_msgs.msg import Temperature
     m1, name1, s1 = open_pty()
     link = str(tmp_path / 'kestrel')
     os.symlink(name1, link)
     got, lock = [], threading.Lock()
     sub = rospy.Subscriber('/kt/temperature', Temperature, lambda msg: got.append(msg.temperature), queue_size=50)
+    load_defaults(ros, workspace, '/kt/kestrel_driver')
     proc = ros.master.run(['rosrun', 'kestrel_driver', 'kestrel_driver', '__ns:=/kt', '_mode:=device',
                            f'_port:={link}', '_reconnect_interval:=0.3', '_lag_correction:=false'],
                           log_name='kestrel_device')
@@ -55,9 +62,19 @@ def test_device_mode_over_a_pty(ros, tmp_path):
         proc.stop()
 
 
-def test_bad_heat_source_exits_2(ros, tmp_path):
+def test_missing_parameter_exits_2(ros):
+    r = subprocess.run(['rosrun', 'kestrel_driver', 'kestrel_driver', '__name:=bare_kestrel'],
+                       env=ros.master.env, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2
+    lines = [l for l in r.stderr.splitlines() if l.strip()]
+    assert len(lines) == 1 and '/bare_kestrel: mode: missing' in lines[0], r.stderr
+
+
+def test_bad_heat_source_exits_2(ros, workspace, tmp_path):
+    load_defaults(ros, workspace, '/bad_kestrel')
     r = subprocess.run(['rosrun', 'kestrel_driver', 'kestrel_driver', '__name:=bad_kestrel',
-                        '_temperature_field:={ambient: 22.0, sources: [{x: 1, y: 1, peak: 5, radius: -1}]}'],
+                        '_temperature_field:={ambient: 22.0, sources: [{name: h, x: 1, y: 1, peak: 5, radius: -1, '
+                        'start: 0.0, ramp: 0.0}]}'],
                        env=ros.master.env, capture_output=True, text=True, timeout=60)
     assert r.returncode == 2
     lines = [l for l in r.stderr.splitlines() if l.strip()]

@@ -1,5 +1,5 @@
 """Cores of the monitoring robot without a master: merger, mapcells, store, policies, search, detector,
-kestrel lag and parser, report writer."""
+kestrel lag and parser, report writer. (The grid and the measurement format: tests/test_cnr_maps.py.)"""
 import json
 import math
 import os
@@ -7,14 +7,14 @@ import os
 import numpy as np
 import pytest
 
+from cnr_maps.grid import MapcellGrid
 from cnr_params import ConfigError, Section
-from cnr_mission.core.report import CellSummary, Record, path_length, read_tsv, render_png, write_summary, write_tsv
+from cnr_mission.core.report import CellSummary, path_length, render_png, write_summary
 from global_goal_manager.core.policies import CellView, CoverageSweep, LeastRecentlyVisited, make_policy
 from kestrel_driver.core.field import TemperatureField
 from kestrel_driver.core.parser import ParseError, parse_line
 from kestrel_driver.core.sensor import LagCorrector, LaggedSensor
-from local_mapcell_manager.core.grid import MapcellGrid
-from local_mapcell_manager.core.store import CellBook, Measurement, MeasurementStore
+from local_mapcell_manager.core.store import CellBook, MeasurementStore
 from merger.core.nearest import NearestMerger
 from mfg.core.detector import Detector, DetectorConfig
 from mfg.core.search import HotspotSearch
@@ -60,39 +60,17 @@ def corridor_grid():
     return MapcellGrid(min_x=0.0, min_y=-1.0, cell_size=1.0, cols=11, rows=2)
 
 
-def test_cell_lookup_boundary_rule():
-    g = corridor_grid()
-    assert len(g) == 22
-    assert g.index_of(0.0, 0.0) is None                     # min is exclusive
-    assert g.index_of(1e-9, -1.0 + 1e-9) == 0
-    assert g.index_of(1.0, 0.0) == 0                        # max is inclusive
-    assert g.index_of(1.0 + 1e-9, 0.0) == 1
-    assert g.index_of(11.0, 1.0) == 21
-    assert g.index_of(11.01, 0.5) is None
-    assert g.cell(19).sextuplet == (8.0, 9.0, 0.0, 1.0, 8.5, 0.5)
-    assert sorted(g.neighbours(0, 8)) == [1, 11, 12] and sorted(g.neighbours(19, 4)) == [8, 18, 20]
-
-
-def test_grid_outside_map_and_config_errors():
-    g = corridor_grid()
-    g.check_inside((-29.8, -34.6, 12.2, 3.4), 'lmm')
-    with pytest.raises(ConfigError) as err:
-        MapcellGrid(0.0, -1.0, 1.0, 30, 2).check_inside((-29.8, -34.6, 12.2, 3.4), 'scenario.yaml')
-    assert 'mapcells' in str(err.value)
-    with pytest.raises(ConfigError):
-        MapcellGrid.from_section(Section({'min_x': 0, 'min_y': 0, 'cell_size': 0, 'cols': 2, 'rows': 2}, 's.yaml'))
-    assert g.overlaps(MapcellGrid(10.5, 0.0, 1.0, 2, 2)) and not g.overlaps(MapcellGrid(11.0, 0.0, 1.0, 2, 2))
-
-
 def test_statistics_visits_and_store_reload(tmp_path):
     g = corridor_grid()
     path = str(tmp_path / 'store.tsv')
     store, book = MeasurementStore(path), CellBook(g)
     values = [(0.5, 0.5, 22.0), (0.6, 0.5, 24.0), (1.5, 0.5, 30.0), (0.5, 0.5, 23.0)]
     for i, (x, y, t) in enumerate(values, 1):
-        m = Measurement(i, float(i), x, y, t, g.index_of(x, y), float(i))
-        store.append(m, g)
+        m = book.new_measurement(float(i), x, y, t, float(i))
+        assert m.number == i and (m.row, m.col) == g.row_col(g.index_of(x, y))
+        store.append(m)
         book.add(m)
+    assert book.new_measurement(5.0, 11.5, 0.5, 22.0, 5.0) is None          # outside the grid
     s = book.states[g.index_of(0.5, 0.5)]
     assert s.n == 3 and s.mean == pytest.approx(23.0) and s.std == pytest.approx(1.0)
     assert s.visit_count == 2 and s.last_visit == 4.0 and s.max == 24.0
@@ -105,7 +83,7 @@ def test_statistics_visits_and_store_reload(tmp_path):
         reloaded.add(m)
     assert reloaded.count == 4 and warnings
     size = os.path.getsize(path)
-    store2.append(Measurement(5, 5.0, 0.5, 0.5, 21.0, g.index_of(0.5, 0.5), 5.0), g)
+    store2.append(reloaded.new_measurement(5.0, 0.5, 0.5, 21.0, 5.0))
     assert os.path.getsize(path) > size                     # nothing truncated
     assert [m.number for m in MeasurementStore(path).load(g)] == [1, 2, 3, 4, 5]
 
@@ -194,16 +172,21 @@ def test_search_unreachable_neighbour_is_checked_and_search_goes_on():
 
 # -- detector ---------------------------------------------------------------------------------------
 def test_detector_modes_and_nan_threshold():
-    d = Detector(DetectorConfig(mode='ambient', ambient=22.0, delta=2.0))
+    d = Detector(DetectorConfig(mode='ambient', ambient=22.0, delta=2.0, z=3.0, min_samples=20))
     assert not d.observe(23.9) and d.observe(24.1)
-    s = Detector(DetectorConfig(mode='statistics', delta=1.0, z=3.0, min_samples=10))
+    s = Detector(DetectorConfig(mode='statistics', ambient=22.0, delta=1.0, z=3.0, min_samples=10))
     rng = np.random.default_rng(0)
     assert not any(s.observe(22.0 + rng.normal(0, 0.1)) for _ in range(50))
     assert s.observe(25.0)
     with pytest.raises(ConfigError):
-        Detector(DetectorConfig(delta=float('nan')))
-    with pytest.raises(ConfigError):
-        DetectorConfig.from_section(Section({'delta': float('nan')}, 'scenario.yaml'))
+        Detector(DetectorConfig(mode='ambient', ambient=22.0, delta=float('nan'), z=3.0, min_samples=20))
+    good = {'mode': 'ambient', 'ambient': 22.0, 'delta': 2.0, 'z': 3.0, 'min_samples': 20}
+    with pytest.raises(ConfigError, match='threshold.delta: must be finite'):
+        DetectorConfig.from_section(Section(dict(good, delta=float('nan')), 'scenario.yaml', 'threshold'))
+    for key in good:                                          # no defaults in code: each field is required
+        with pytest.raises(ConfigError, match=f'scenario.yaml: threshold.{key}: missing'):
+            DetectorConfig.from_section(Section({k: v for k, v in good.items() if k != key}, 'scenario.yaml',
+                                                'threshold'))
 
 
 # -- kestrel -----------------------------------------------------------------------------------------
@@ -217,7 +200,7 @@ def test_lag_step_response_is_exact():
 
 def test_lag_correction_reduces_error_through_a_heat_source():
     field = TemperatureField.from_section(Section({'ambient': 22.0, 'sources': [
-        {'name': 'h', 'x': 5.0, 'y': 0.0, 'peak': 10.0, 'radius': 0.8}]}, 'f.yaml'))
+        {'name': 'h', 'x': 5.0, 'y': 0.0, 'peak': 10.0, 'radius': 0.8, 'start': 0.0, 'ramp': 0.0}]}, 'f.yaml'))
     tau = 6.0
     sensor, corr = LaggedSensor(tau), LagCorrector(tau, window=5)
     rng = np.random.default_rng(1)
@@ -238,10 +221,16 @@ def test_lag_correction_reduces_error_through_a_heat_source():
 
 
 def test_field_validation():
+    good = {'name': 'h', 'x': 0, 'y': 0, 'peak': 5, 'radius': 1.0, 'start': 0.0, 'ramp': 0.0}
     with pytest.raises(ConfigError) as err:
-        TemperatureField.from_section(Section({'ambient': 22.0, 'sources': [{'x': 0, 'y': 0, 'peak': 5,
-                                                                                 'radius': 0}]}, 'scenario.yaml'))
+        TemperatureField.from_section(Section({'ambient': 22.0, 'sources': [dict(good, radius=0)]}, 'scenario.yaml'))
     assert 'sources[0].radius' in str(err.value)
+    with pytest.raises(ConfigError, match=r"sources\[0\].peak: expected a number, got 'hot'"):
+        TemperatureField.from_section(Section({'ambient': 22.0, 'sources': [dict(good, peak='hot')]}, 's.yaml'))
+    for key in good:
+        with pytest.raises(ConfigError, match=rf'sources\[0\].{key}: missing'):
+            TemperatureField.from_section(Section({'ambient': 22.0, 'sources': [
+                {k: v for k, v in good.items() if k != key}]}, 'scenario.yaml'))
 
 
 @pytest.mark.parametrize('line, value', [('23.4', 23.4), ('T,23.4\r\n', 23.4), ('TEMP,74.12,F', 23.4),
@@ -258,9 +247,6 @@ def test_parser_rejects_garbage(line):
 
 # -- report ------------------------------------------------------------------------------------------
 def test_report_files(tmp_path):
-    recs = [Record(1, 0.3, 0.5, 0.0, 22.1, 0, 0, 0, 0.3), Record(2, 0.6, 0.6, 0.0, 22.3, 0, 0, 0, 0.58)]
-    write_tsv(str(tmp_path / 'm.tsv'), recs)
-    assert read_tsv(str(tmp_path / 'm.tsv')) == recs
     write_summary(str(tmp_path / 's.json'), {'found': True, 'x': float('nan')})
     assert json.load(open(tmp_path / 's.json')) == {'found': True, 'x': None}
     cells = [CellSummary(i, 0, i, i, i + 1, 0, 1, 22.0 + i if i != 2 else float('nan'), 3) for i in range(4)]

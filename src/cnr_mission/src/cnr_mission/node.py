@@ -18,25 +18,28 @@ from nav_msgs.msg import Odometry
 from sensor_msgs.msg import BatteryState
 
 import cnr_params
-from cnr_mission.core.report import CellSummary, Record, path_length, render_png, write_summary, write_tsv
+from cnr_maps.grid import MapcellGrid
+from cnr_maps.mapio import load_map
+from cnr_maps.measurements import Measurement, write_tsv
+from cnr_mission.core.report import CellSummary, path_length, render_png, write_summary
+from cnr_mission.core.scenario import read_mission
 from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, SearchState
 from cnr_msgs.srv import GetMeasurements
+from cnr_params import ConfigError
 from cnr_params.ros import private_section
+from kestrel_driver.core.field import TemperatureField
 
 
 class MissionMonitor:
     def __init__(self) -> None:
         p = private_section('~')
-        mission = p.section('mission', {})
-        scenario = p.section('scenario', {})
-        self.name = scenario.string('name', 'mission')
-        self.extra_time = mission.number('extra_time', 16.0, nonnegative=True)
-        self.timeout = mission.number('timeout', 900.0, positive=True)
-        self.report_dir = os.path.abspath(os.path.expanduser(p.string('report_dir', 'reports/mission')))
-        self.map_file = p.string('map_file', '')
-        self.sources = [(s.string('name', 'source'), s.number('x'), s.number('y'))
-                        for s in p.section('temperature_field', {}).sections('sources')]
-        self.rtf = p.number('real_time_factor', 1.0, nonnegative=True)
+        mission = read_mission(p)
+        self.name = p.section('scenario').string('name')
+        self.extra_time, self.timeout = mission.extra_time, mission.timeout
+        self.report_dir = os.path.abspath(os.path.expanduser(p.string('report_dir')))
+        self.map_file = p.file_path('map_file')
+        self.sources = [(s.name, s.x, s.y) for s in TemperatureField.from_section(p.section('temperature_field')).sources]
+        self.rtf = p.number('real_time_factor', nonnegative=True)
         self.lock = threading.Lock()
         self.trajectory: List[Tuple[float, float]] = []
         self.battery_first: Optional[BatteryState] = None
@@ -105,19 +108,15 @@ class MissionMonitor:
 
     def write_report(self, found: bool) -> str:
         os.makedirs(self.report_dir, exist_ok=True)
-        records: List[Record] = []
+        records: List[Measurement] = []
         try:
             rospy.wait_for_service('local_mapcell_manager/get_measurements', 10)
             res = rospy.ServiceProxy('local_mapcell_manager/get_measurements', GetMeasurements)(-1)
-            cols = self.cells.cols if self.cells else 1
-            for m in res.measurements:
-                cell = -1
-                if self.cells:
-                    cell = next((c.index for c in self.cells.cells if c.min_x < m.x <= c.max_x
-                                 and c.min_y < m.y <= c.max_y), -1)
-                records.append(Record(m.header.seq, m.header.stamp.to_sec(), m.x, m.y, m.temperature, cell,
-                                      cell // cols if cell >= 0 else -1, cell % cols if cell >= 0 else -1,
-                                      m.pose_stamp.to_sec()))
+            grid = MapcellGrid.from_cell_states(self.cells) if self.cells and self.cells.cells else None
+            for m in res.measurements:           # each carries the cell local_mapcell_manager assigned
+                row, col = grid.row_col(m.cell) if grid and 0 <= m.cell < len(grid) else (-1, -1)
+                records.append(Measurement(m.header.seq, m.header.stamp.to_sec(), m.x, m.y, m.temperature, m.cell,
+                                           row, col, m.pose_stamp.to_sec()))
         except (rospy.ROSException, rospy.ServiceException) as exc:
             rospy.logwarn(f'could not fetch the stored measurements: {exc}')
         write_tsv(os.path.join(self.report_dir, 'measurements.tsv'), records)
@@ -145,14 +144,12 @@ class MissionMonitor:
             heat_sources=[dict(name=n, x=x, y=y) for n, x, y in self.sources])
         if cells:
             occ = extent = None
-            if self.map_file:
-                try:
-                    from cnr_sim.core.mapio import load_map
-                    m = load_map(self.map_file)
-                    occ, b = m.data, m.bounds()
-                    extent = (b[0], b[2], b[1], b[3])
-                except Exception as exc:    # the report must still be written
-                    rospy.logwarn(f'map not drawn: {exc}')
+            try:
+                m = load_map(self.map_file)
+                occ, b = m.data, m.bounds()
+                extent = (b[0], b[2], b[1], b[3])
+            except ConfigError as exc:    # the report must still be written
+                rospy.logwarn(f'map not drawn: {exc}')
             title = f'{self.name}: ' + (f'hotspot in cell {h.cell_index} after {summary["sim_time_to_find"]:.0f} s'
                                         if h else 'no hotspot found')
             render_png(os.path.join(self.report_dir, 'mapcells.png'), cells, traj, h.cell_index if h else None,

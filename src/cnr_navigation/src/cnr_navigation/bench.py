@@ -27,7 +27,7 @@ INFLATION = InflationLayerConfig(inflation_radius=0.5, cost_scaling_factor=5.0)
 
 
 def hall_costmap() -> LayeredCostmap:
-    from cnr_sim.core.mapio import load_map
+    from cnr_maps.mapio import load_map
     grid = load_map(os.path.join(WS, 'maps', 'datacenter.yaml'))
     cfg = CostmapConfig(global_frame='map', robot_radius=0.20, static_layer=StaticLayerConfig(track_unknown_space=True),
                         obstacle_layer=ObstacleLayerConfig(), inflation_layer=INFLATION)

@@ -16,9 +16,10 @@ import xmlrpc.client
 
 import numpy as np
 
-from cnr_sim.core.kinematics import BaseLimits, Pose2D
+from cnr_maps.pose import Pose2D
+from cnr_sim.core.kinematics import BaseLimits
 from cnr_sim.core.laser import LaserConfig
-from cnr_sim.core.mapio import load_map
+from cnr_maps.mapio import load_map
 from cnr_sim.core.world import World, WorldConfig
 
 WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))

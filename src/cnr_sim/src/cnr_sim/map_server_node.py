@@ -12,7 +12,7 @@ from nav_msgs.msg import MapMetaData, OccupancyGrid
 from nav_msgs.srv import GetMap, GetMapResponse
 
 import cnr_params
-from cnr_sim.core.mapio import OccupancyMap, load_map
+from cnr_maps.mapio import OccupancyMap, load_map
 from cnr_sim.node import yaw_quaternion
 
 

@@ -24,18 +24,19 @@ from sensor_msgs.msg import BatteryState, LaserScan
 from std_srvs.srv import Empty, EmptyResponse
 
 import cnr_params
+from cnr_maps.mapio import load_map
+from cnr_maps.pose import Pose2D, yaw_to_quaternion
 from cnr_msgs.msg import Collision
 from cnr_msgs.srv import Teleport, TeleportResponse
 from cnr_params.ros import private_section
 from cnr_sim.core.battery import BatteryModel, CpuMeter, NetMeter
-from cnr_sim.core.kinematics import Pose2D
-from cnr_sim.core.mapio import load_map
 from cnr_sim.core.world import World
 from cnr_sim.params import SimulatorParams, read_params
 
 
 def yaw_quaternion(yaw: float) -> Quaternion:
-    return Quaternion(0.0, 0.0, math.sin(0.5 * yaw), math.cos(0.5 * yaw))
+    """geometry_msgs/Quaternion of a yaw [rad] (the tuple from :func:`cnr_maps.pose.yaw_to_quaternion`)."""
+    return Quaternion(*yaw_to_quaternion(yaw))
 
 
 def transform(stamp: rospy.Time, parent: str, child: str, x: float, y: float, yaw: float,

@@ -8,7 +8,8 @@ from typing import List, Tuple
 from cnr_params import Section
 
 from cnr_sim.core.battery import BatteryConfig
-from cnr_sim.core.kinematics import BaseLimits, Pose2D
+from cnr_maps.pose import Pose2D
+from cnr_sim.core.kinematics import BaseLimits
 from cnr_sim.core.laser import LaserConfig
 from cnr_sim.core.obstacles import MovingObstacle, obstacles_from_config
 from cnr_sim.core.world import WorldConfig

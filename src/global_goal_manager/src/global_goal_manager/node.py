@@ -5,19 +5,21 @@ import math
 import threading
 
 import rospy
-from geometry_msgs.msg import PoseStamped
+from geometry_msgs.msg import PoseStamped, Quaternion
 
 import cnr_params
+from cnr_maps.grid import MapcellGrid
+from cnr_maps.pose import yaw_to_quaternion
 from cnr_msgs.msg import CellStates
 from cnr_msgs.srv import NextGoal, NextGoalResponse
 from cnr_params.ros import private_section
-from global_goal_manager.core.policies import CellView, make_policy
+from global_goal_manager.core.policies import CellView, GoalManagerParams, read_params
 
 
 class GoalManagerNode:
-    def __init__(self, policy_name: str, frame_id: str, source: str) -> None:
-        self.policy = make_policy(policy_name, source, 'global_goal_manager.policy')
-        self.frame_id = frame_id
+    def __init__(self, p: GoalManagerParams) -> None:
+        self.policy = p.policy
+        self.frame_id = p.frame_id
         self.lock = threading.Lock()
         self.states = None
         self.pub = rospy.Publisher('global_goal', PoseStamped, queue_size=1, latch=True)
@@ -37,8 +39,7 @@ class GoalManagerNode:
         if states is None or not states.cells:
             return NextGoalResponse(success=False, message='no cell_states received yet', policy=self.policy.name)
         views = [CellView(c.index, c.row, c.col, c.center_x, c.center_y, c.last_visit.to_sec()) for c in states.cells]
-        robot_cell = next((c.index for c in states.cells if c.min_x < req.robot_x <= c.max_x
-                           and c.min_y < req.robot_y <= c.max_y), None)
+        robot_cell = MapcellGrid.from_cell_states(states).index_of(req.robot_x, req.robot_y)
         index = self.policy.next_cell(views, robot_cell, (req.robot_x, req.robot_y))
         if index is None:
             return NextGoalResponse(success=False, message='no cell to choose', policy=self.policy.name)
@@ -48,7 +49,7 @@ class GoalManagerNode:
         goal.header.frame_id = self.frame_id
         goal.pose.position.x, goal.pose.position.y = cell.center_x, cell.center_y
         yaw = math.atan2(cell.center_y - req.robot_y, cell.center_x - req.robot_x)
-        goal.pose.orientation.z, goal.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+        goal.pose.orientation = Quaternion(*yaw_to_quaternion(yaw))
         self.pub.publish(goal)
         return NextGoalResponse(success=True, message=f'cell {index} (col {cell.col}, row {cell.row})',
                                 policy=self.policy.name, cell=cell, goal=goal)
@@ -57,7 +58,5 @@ class GoalManagerNode:
 @cnr_params.exit_on_config_error
 def main() -> None:
     rospy.init_node('global_goal_manager')
-    p = private_section('~')
-    sec = p.section('global_goal_manager', {})
-    GoalManagerNode(sec.string('policy', 'least_recently_visited'), p.string('frame_id', 'map'), p.source)
+    GoalManagerNode(read_params(private_section('~')))
     rospy.spin()

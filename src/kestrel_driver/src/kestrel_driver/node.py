@@ -43,18 +43,19 @@ class KestrelParams:
 
 
 def read_params(p: Section) -> KestrelParams:
-    mode = p.string('mode', 'sim', choices=('sim', 'device'))
+    """No defaults in code: they live in config/kestrel_driver.yaml (the field in the scenario file)."""
+    mode = p.string('mode', choices=('sim', 'device'))
     return KestrelParams(
-        mode=mode, rate=p.number('rate', 3.0, positive=True), frame_id=p.string('frame_id', 'kestrel'),
-        variance=p.number('variance', 0.25, nonnegative=True),
-        time_constant=p.number('time_constant', 6.0, nonnegative=True),
-        noise_stddev=p.number('noise_stddev', 0.05, nonnegative=True),
-        lag_correction=p.boolean('lag_correction', True),
-        correction_window=p.integer('correction_window', 5, minimum=2),
-        pose_topic=p.string('pose_topic', 'base_pose_ground_truth'),
+        mode=mode, rate=p.number('rate', positive=True), frame_id=p.string('frame_id'),
+        variance=p.number('variance', nonnegative=True),
+        time_constant=p.number('time_constant', nonnegative=True),
+        noise_stddev=p.number('noise_stddev', nonnegative=True),
+        lag_correction=p.boolean('lag_correction'),
+        correction_window=p.integer('correction_window', minimum=2),
+        pose_topic=p.string('pose_topic'),
         field=TemperatureField.from_section(p.section('temperature_field')) if mode == 'sim' else None,
-        port=p.string('port', '/dev/ttyUSB0'), baud=p.integer('baud', 9600, minimum=1),
-        reconnect_interval=p.number('reconnect_interval', 2.0, positive=True), seed=p.integer('seed', 0))
+        port=p.string('port'), baud=p.integer('baud', minimum=1),
+        reconnect_interval=p.number('reconnect_interval', positive=True), seed=p.integer('seed'))
 
 
 class KestrelNode:

@@ -4,7 +4,6 @@ from __future__ import annotations
 import math
 import os
 import threading
-from dataclasses import dataclass
 
 import rospy
 
@@ -13,32 +12,11 @@ from cnr_msgs.msg import CellState as CellStateMsg
 from cnr_msgs.msg import CellStates, MergedMeasurement
 from cnr_msgs.srv import (GetCell, GetCellResponse, GetCellStates, GetCellStatesResponse, GetMeasurements,
                           GetMeasurementsResponse)
-from cnr_params import Section
+from cnr_maps.grid import MapcellGrid
+from cnr_maps.measurements import Measurement
 from cnr_params.ros import private_section
-from local_mapcell_manager.core.grid import MapcellGrid
-from local_mapcell_manager.core.store import CellBook, Measurement, MeasurementStore
-
-
-@dataclass
-class ManagerParams:
-    grid: MapcellGrid
-    store: str
-    reset_store: bool
-    map_file: str
-    publish_period: float
-    frame_id: str
-
-
-def read_params(p: Section) -> ManagerParams:
-    grid = MapcellGrid.from_section(p.section('mapcells'))
-    map_file = p.string('map_file', '')
-    if map_file:
-        from cnr_sim.core.mapio import load_map
-        grid.check_inside(load_map(map_file).bounds(), p.source, 'mapcells')
-    return ManagerParams(grid=grid, store=os.path.expanduser(p.string('store', '~/.ros/cnr/measurements.tsv')),
-                         reset_store=p.boolean('reset_store', False), map_file=map_file,
-                         publish_period=1.0 / p.number('max_publish_rate', 2.0, positive=True),
-                         frame_id=p.string('frame_id', 'map'))
+from local_mapcell_manager.core.params import ManagerParams, read_params
+from local_mapcell_manager.core.store import CellBook, MeasurementStore
 
 
 def cell_msg(grid: MapcellGrid, book: CellBook, index: int) -> CellStateMsg:
@@ -66,6 +44,7 @@ class ManagerNode:
                       f'{self.book.count} stored measurements reloaded from {p.store}')
         self.outside = 0
         self.pub = rospy.Publisher('cell_states', CellStates, queue_size=1, latch=True)
+        self.measurement_pub = rospy.Publisher('mapcell_measurements', MergedMeasurement, queue_size=100)
         self._dirty = True
         self._last_pub = -math.inf
         rospy.Service('~get_cell', GetCell, self._get_cell)
@@ -93,16 +72,26 @@ class ManagerNode:
         if not all(math.isfinite(v) for v in values):
             rospy.logwarn_throttle(5.0, f'ignored a merged measurement with non-finite values {values}')
             return
-        index = self.grid.index_of(msg.x, msg.y)
-        if index is None:
-            self.outside += 1
-            return
         with self.lock:
-            m = Measurement(self.book.count + 1, msg.header.stamp.to_sec(), msg.x, msg.y, msg.temperature, index,
-                            msg.pose_stamp.to_sec())
-            self.store.append(m, self.grid)
+            m = self.book.new_measurement(msg.header.stamp.to_sec(), msg.x, msg.y, msg.temperature,
+                                          msg.pose_stamp.to_sec())
+            if m is None:
+                self.outside += 1
+                return
+            self.store.append(m)
             self.book.add(m)
+        self.measurement_pub.publish(self._measurement_msg(m, msg.yaw))
         self._dirty = True
+
+    def _measurement_msg(self, m: Measurement, yaw: float = math.nan) -> MergedMeasurement:
+        """A stored measurement as a message: its cell filled, its store number in header.seq."""
+        mm = MergedMeasurement(x=m.x, y=m.y, yaw=yaw, temperature=m.temperature,
+                               pose_stamp=rospy.Time.from_sec(m.pose_time),
+                               stamp_difference=abs(m.time - m.pose_time), cell=m.cell)
+        mm.header.stamp = rospy.Time.from_sec(m.time)
+        mm.header.frame_id = self.p.frame_id
+        mm.header.seq = m.number
+        return mm
 
     def _get_cell(self, req) -> GetCellResponse:
         index = self.grid.index_of(req.x, req.y)
@@ -117,14 +106,7 @@ class ManagerNode:
                                                                    f'(0..{len(self.grid) - 1} or -1 for all)')
         with self.lock:
             ms = self.book.measurements(None if req.cell_index == -1 else req.cell_index)
-        out = []
-        for m in ms:
-            mm = MergedMeasurement(x=m.x, y=m.y, temperature=m.temperature, pose_stamp=rospy.Time.from_sec(m.pose_time),
-                                   stamp_difference=abs(m.time - m.pose_time))
-            mm.header.stamp = rospy.Time.from_sec(m.time)
-            mm.header.frame_id = self.p.frame_id
-            mm.header.seq = m.number
-            out.append(mm)
+        out = [self._measurement_msg(m) for m in ms]
         return GetMeasurementsResponse(success=True, message=f'{len(out)} measurements', measurements=out)
 
 

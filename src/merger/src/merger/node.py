@@ -12,6 +12,7 @@ from sensor_msgs.msg import Temperature
 from std_msgs.msg import UInt32
 
 import cnr_params
+from cnr_maps.pose import quaternion_to_yaw
 from cnr_msgs.msg import MergedMeasurement
 from cnr_params import Section
 from cnr_params.ros import private_section
@@ -27,14 +28,11 @@ class MergerParams:
 
 
 def read_params(p: Section) -> MergerParams:
-    return MergerParams(tolerance=p.number('tolerance', 0.1, positive=True),
-                        max_wait=p.number('max_wait', 0.5, positive=True),
-                        pose_horizon=p.number('pose_horizon', 10.0, positive=True),
-                        pose_topic=p.string('pose_topic', 'base_pose_ground_truth'))
-
-
-def _yaw(q) -> float:
-    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    """No defaults in code: they live in config/merger.yaml."""
+    return MergerParams(tolerance=p.number('tolerance', positive=True),
+                        max_wait=p.number('max_wait', positive=True),
+                        pose_horizon=p.number('pose_horizon', positive=True),
+                        pose_topic=p.string('pose_topic'))
 
 
 class MergerNode:
@@ -59,8 +57,10 @@ class MergerNode:
             rospy.logwarn_throttle(5.0, 'ignored a pose with non-finite values')
             return
         self.frame = msg.header.frame_id or self.frame
+        q = p.orientation
+        yaw = quaternion_to_yaw((q.x, q.y, q.z, q.w))
         with self.lock:
-            self.core.add_pose(msg.header.stamp.to_sec(), (p.position.x, p.position.y, _yaw(p.orientation)))
+            self.core.add_pose(msg.header.stamp.to_sec(), (p.position.x, p.position.y, yaw))
         self._flush()
 
     def _on_temperature(self, msg: Temperature) -> None:
@@ -84,6 +84,7 @@ class MergerNode:
             out.x, out.y, out.yaw = m.pose
             out.temperature = m.measurement
             out.stamp_difference = m.difference
+            out.cell = -1                   # the merger does not know the grid: local_mapcell_manager assigns it
             self.pub.publish(out)
         if dropped:
             self.dropped_pub.publish(UInt32(stats.dropped_no_pose))

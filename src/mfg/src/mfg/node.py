@@ -1,84 +1,32 @@
 """``mfg`` (measurement feedback goal): patrol the global goals, and locate a hotspot when a value is abnormal.
 
 Drives through ``move_base`` (actionlib); asks ``global_goal_manager/next_goal`` for global goals; watches
-``merged_measurements``; publishes ``hotspot`` and ``~state``. See the package README.
+``mapcell_measurements`` (stored measurements, their cell assigned by local_mapcell_manager); publishes
+``hotspot`` and ``~state``. See the package README.
 """
 from __future__ import annotations
 
 import math
 import threading
 from collections import deque
-from dataclasses import dataclass
 from typing import Deque, List, Optional, Tuple
 
 import actionlib
 import rospy
 from actionlib_msgs.msg import GoalStatus
+from geometry_msgs.msg import Quaternion
 from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
 from nav_msgs.msg import Odometry
 
 import cnr_params
 from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, SearchState
+from cnr_maps.grid import MapcellGrid
+from cnr_maps.pose import yaw_to_quaternion
 from cnr_msgs.srv import NextGoal
-from cnr_params import Section
 from cnr_params.ros import private_section
-from mfg.core.detector import Detector, DetectorConfig
+from mfg.core.detector import Detector
+from mfg.core.params import MfgParams, read_params
 from mfg.core.search import HotspotSearch
-
-
-@dataclass
-class MfgParams:
-    detector: DetectorConfig
-    neighbourhood: int
-    settle_time: float
-    min_measurements: int
-    measure_timeout: float
-    goal_timeout: float
-    next_goal_service: str
-    pose_topic: str
-    suppress_radius: int
-    frame_id: str
-
-
-def read_params(p: Section) -> MfgParams:
-    m = p.section('mfg', {})
-    return MfgParams(detector=DetectorConfig.from_section(m.section('threshold', {})),
-                     neighbourhood=_connectivity(m),
-                     settle_time=m.number('settle_time', 6.0, nonnegative=True),
-                     min_measurements=m.integer('min_measurements', 6, minimum=1),
-                     measure_timeout=m.number('measure_timeout', 20.0, positive=True),
-                     goal_timeout=m.number('goal_timeout', 120.0, positive=True),
-                     next_goal_service=m.string('next_goal_service', 'global_goal_manager/next_goal'),
-                     pose_topic=m.string('pose_topic', 'base_pose_ground_truth'),
-                     suppress_radius=m.integer('suppress_radius', 2, minimum=0),
-                     frame_id=m.string('frame_id', 'map'))
-
-
-def _connectivity(m: Section) -> int:
-    value = m.integer('neighbourhood', 8)
-    if value not in (4, 8):
-        raise m.error('neighbourhood', f'must be 4 or 8, got {value}')
-    return value
-
-
-class Grid:
-    """The mapcell grid as learnt from ``cell_states`` (geometry only)."""
-
-    def __init__(self, msg: CellStates) -> None:
-        self.rows, self.cols = msg.rows, msg.cols
-        self.cells = list(msg.cells)
-
-    def index_of(self, x: float, y: float) -> Optional[int]:
-        for c in self.cells:
-            if c.min_x < x <= c.max_x and c.min_y < y <= c.max_y:
-                return c.index
-        return None
-
-    def neighbours(self, index: int, connectivity: int) -> List[int]:
-        row, col = divmod(index, self.cols)
-        steps = [(-1, 0), (1, 0), (0, -1), (0, 1)] + ([(-1, -1), (-1, 1), (1, -1), (1, 1)] if connectivity == 8 else [])
-        return [(row + dr) * self.cols + col + dc for dr, dc in steps
-                if 0 <= row + dr < self.rows and 0 <= col + dc < self.cols]
 
 
 class MfgNode:
@@ -86,7 +34,7 @@ class MfgNode:
         self.p = p
         self.detector = Detector(p.detector)
         self.lock = threading.Lock()
-        self.grid: Optional[Grid] = None
+        self.grid: Optional[MapcellGrid] = None
         self.pose: Optional[Tuple[float, float]] = None
         self.measurements: Deque[Tuple[float, int, float]] = deque(maxlen=5000)   # (t, cell, temperature)
         self.trigger: Optional[Tuple[float, int, float]] = None
@@ -99,30 +47,28 @@ class MfgNode:
         self.hotspot_pub = rospy.Publisher('hotspot', Hotspot, queue_size=1, latch=True)
         rospy.Subscriber('cell_states', CellStates, self._on_cells, queue_size=1)
         rospy.Subscriber(p.pose_topic, Odometry, self._on_pose, queue_size=1)
-        rospy.Subscriber('merged_measurements', MergedMeasurement, self._on_measurement, queue_size=100)
+        rospy.Subscriber('mapcell_measurements', MergedMeasurement, self._on_measurement, queue_size=100)
 
     # -- inputs --------------------------------------------------------------------------------
     def _on_cells(self, msg: CellStates) -> None:
         if self.grid is None and msg.cells:
-            self.grid = Grid(msg)
+            self.grid = MapcellGrid.from_cell_states(msg)
 
     def _on_pose(self, msg: Odometry) -> None:
         self.pose = (msg.pose.pose.position.x, msg.pose.pose.position.y)
 
     def _on_measurement(self, msg: MergedMeasurement) -> None:
-        if self.grid is None or not all(math.isfinite(v) for v in (msg.x, msg.y, msg.temperature)):
+        if self.grid is None or not 0 <= msg.cell < len(self.grid) or not math.isfinite(msg.temperature):
             return
-        cell = self.grid.index_of(msg.x, msg.y)
+        cell = msg.cell            # assigned by local_mapcell_manager when it stored the measurement
         t = msg.header.stamp.to_sec()
         with self.lock:
-            self.state.last_temperature, self.state.last_cell = msg.temperature, -1 if cell is None else cell
-            if cell is None:
-                return
+            self.state.last_temperature, self.state.last_cell = msg.temperature, cell
             self.measurements.append((t, cell, msg.temperature))
             if not self.cell_trail or self.cell_trail[-1] != cell:
                 self.cell_trail.append(cell)
             abnormal = self.detector.observe(msg.temperature)
-            suppressed = any(self._cell_distance(cell, h) <= self.p.suppress_radius for h in self.hotspots)
+            suppressed = any(self.grid.chebyshev(cell, h) <= self.p.suppress_radius for h in self.hotspots)
             if abnormal and not suppressed and self.trigger is None and self.state.mode == 'PATROL':
                 self.trigger = (t, cell, msg.temperature)
 
@@ -147,11 +93,8 @@ class MfgNode:
         goal.target_pose.header.frame_id = self.p.frame_id
         goal.target_pose.header.stamp = rospy.Time.now()
         goal.target_pose.pose.position.x, goal.target_pose.pose.position.y = x, y
-        if self.pose is not None:
-            yaw = math.atan2(y - self.pose[1], x - self.pose[0])
-            goal.target_pose.pose.orientation.z, goal.target_pose.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
-        else:
-            goal.target_pose.pose.orientation.w = 1.0
+        yaw = math.atan2(y - self.pose[1], x - self.pose[0]) if self.pose is not None else 0.0
+        goal.target_pose.pose.orientation = Quaternion(*yaw_to_quaternion(yaw))
         self.client.send_goal(goal)
         deadline = rospy.Time.now().to_sec() + self.p.goal_timeout
         while not rospy.is_shutdown():
@@ -180,14 +123,8 @@ class MfgNode:
             rospy.sleep(0.1)
         return math.nan
 
-    def _cell_distance(self, a: int, b: int) -> int:
-        """Chebyshev distance between two cells [cells]."""
-        ra, ca = divmod(a, self.grid.cols)
-        rb, cb = divmod(b, self.grid.cols)
-        return max(abs(ra - rb), abs(ca - cb))
-
     def cell_centre(self, index: int) -> Tuple[float, float]:
-        c = self.grid.cells[index]
+        c = self.grid.cell(index)
         return c.center_x, c.center_y
 
     # -- behaviours ----------------------------------------------------------------------------
@@ -244,7 +181,7 @@ class MfgNode:
             step = s.report(target, self.measure(target))
             self.publish_state('SEARCH', f'cell {target}: {step.mean:.2f} degC ({step.outcome}); IC {s.ic} '
                                          f'{s.ic_mean:.2f} degC; unchecked {s.unchecked}', search=s)
-        hot = self.grid.cells[s.ic]
+        hot = self.grid.cell(s.ic)
         msg = Hotspot(cell_index=s.ic, row=hot.row, col=hot.col, x=hot.center_x, y=hot.center_y,
                       temperature=s.ic_mean, search_duration=rospy.Time.now().to_sec() - t0,
                       cells_checked=sum(1 for h in s.history if h.outcome != 'hotter') + len(s.ic_history) - 1)

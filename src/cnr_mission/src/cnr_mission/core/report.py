@@ -2,8 +2,8 @@
 
 Files written into the report folder:
 
-* ``measurements.tsv`` — the merged measurements in the thesis's tab-separated format
-  (measurement, time, x, y, temperature, cell, row, col, pose_time);
+* ``measurements.tsv`` — the stored measurements in the format of :mod:`cnr_maps.measurements`
+  (written with its ``write_tsv``);
 * ``summary.json`` — scenario, hotspot, sim time to find it, distance driven, battery used, counts;
 * ``mapcells.png`` — the map with every mapcell coloured by its average temperature, the robot's path and
   the hotspot marked.
@@ -13,12 +13,10 @@ from __future__ import annotations
 import json
 import math
 import os
-from dataclasses import dataclass, field
-from typing import Dict, List, Optional, Sequence, Tuple
+from dataclasses import dataclass
+from typing import Dict, Optional, Sequence, Tuple
 
 import numpy as np
-
-TSV_HEADER = ['measurement', 'time', 'x', 'y', 'temperature', 'cell', 'row', 'col', 'pose_time']
 
 
 @dataclass
@@ -34,46 +32,12 @@ class CellSummary:
     count: int
 
 
-@dataclass
-class Record:
-    number: int
-    time: float
-    x: float
-    y: float
-    temperature: float
-    cell: int
-    row: int
-    col: int
-    pose_time: float
-
-
 def path_length(points: Sequence[Tuple[float, float]]) -> float:
     """Length of a polyline [m]."""
     if len(points) < 2:
         return 0.0
     p = np.asarray(points, dtype=float)
     return float(np.sum(np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))))
-
-
-def write_tsv(path: str, records: Sequence[Record]) -> None:
-    with open(path, 'w') as f:
-        f.write('\t'.join(TSV_HEADER) + '\n')
-        for r in records:
-            f.write(f'{r.number}\t{r.time:.6f}\t{r.x:.4f}\t{r.y:.4f}\t{r.temperature:.4f}\t{r.cell}\t{r.row}\t'
-                    f'{r.col}\t{r.pose_time:.6f}\n')
-
-
-def read_tsv(path: str) -> List[Record]:
-    out = []
-    with open(path) as f:
-        header = f.readline().rstrip('\n').split('\t')
-        if header != TSV_HEADER:
-            raise ValueError(f'{path}: unexpected header {header}')
-        for line in f:
-            p = line.rstrip('\n').split('\t')
-            out.append(Record(int(p[0]), float(p[1]), float(p[2]), float(p[3]), float(p[4]), int(p[5]), int(p[6]),
-                              int(p[7]), float(p[8])))
-    return out
 
 
 def write_summary(path: str, summary: Dict) -> None:

@@ -1,34 +1,16 @@
-"""Planar poses, rigid transforms and goal validation (ROS-free).
+"""Rigid transforms of paths and goal validation (ROS-free).
 
-Angles are in radians, lengths in metres. Quaternions are (x, y, z, w) tuples as in
-geometry_msgs/Quaternion.
+``Pose2D``, angles and quaternions come from :mod:`cnr_maps.pose` (re-exported here for this package).
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
-from typing import Optional, Tuple
+from typing import Optional
 
 import numpy as np
 
-Quaternion = Tuple[float, float, float, float]
-
-
-def normalize_angle(angle):
-    """Wrap angles (scalar or array) to [-pi, pi)."""
-    return (np.asarray(angle) + math.pi) % (2.0 * math.pi) - math.pi if isinstance(angle, np.ndarray) \
-        else (angle + math.pi) % (2.0 * math.pi) - math.pi
-
-
-def yaw_to_quaternion(yaw: float) -> Quaternion:
-    """Quaternion (x, y, z, w) of a rotation by ``yaw`` [rad] about z."""
-    return (0.0, 0.0, math.sin(yaw / 2.0), math.cos(yaw / 2.0))
-
-
-def quaternion_to_yaw(q: Quaternion) -> float:
-    """Yaw [rad] of a quaternion (x, y, z, w) (roll and pitch ignored)."""
-    x, y, z, w = q
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+from cnr_maps.pose import Pose2D, Quaternion, quaternion_to_yaw, yaw_to_quaternion  # noqa: F401
+from cnr_maps.pose import wrap_angle as normalize_angle  # noqa: F401
 
 
 def quaternion_problem(q: Quaternion) -> Optional[str]:
@@ -49,37 +31,6 @@ def quaternion_problem(q: Quaternion) -> Optional[str]:
     if abs(dot - 1.0) > 1e-3:
         return 'Quaternion is invalid... for navigation the z-axis of the quaternion must be close to vertical.'
     return None
-
-
-@dataclass(frozen=True)
-class Pose2D:
-    """A planar pose: position ``x``, ``y`` [m] and heading ``yaw`` [rad]."""
-
-    x: float
-    y: float
-    yaw: float = 0.0
-
-    def distance(self, other: 'Pose2D') -> float:
-        """Euclidean distance [m] between the positions."""
-        return math.hypot(self.x - other.x, self.y - other.y)
-
-    def is_finite(self) -> bool:
-        return math.isfinite(self.x) and math.isfinite(self.y) and math.isfinite(self.yaw)
-
-    def compose(self, other: 'Pose2D') -> 'Pose2D':
-        """``self * other``: ``other`` expressed in the frame ``self`` is given in."""
-        c, s = math.cos(self.yaw), math.sin(self.yaw)
-        return Pose2D(self.x + c * other.x - s * other.y, self.y + s * other.x + c * other.y,
-                      float(normalize_angle(self.yaw + other.yaw)))
-
-    def inverse(self) -> 'Pose2D':
-        c, s = math.cos(self.yaw), math.sin(self.yaw)
-        return Pose2D(-c * self.x - s * self.y, s * self.x - c * self.y, -self.yaw)
-
-    def apply(self, xs: np.ndarray, ys: np.ndarray) -> Tuple[np.ndarray, np.ndarray]:
-        """Transform point arrays given in the child frame into this pose's parent frame."""
-        c, s = math.cos(self.yaw), math.sin(self.yaw)
-        return self.x + c * xs - s * ys, self.y + s * xs + c * ys
 
 
 IDENTITY = Pose2D(0.0, 0.0, 0.0)

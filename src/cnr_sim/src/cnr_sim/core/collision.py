@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import ndimage
 
-from cnr_sim.core.mapio import OccupancyMap
+from cnr_maps.mapio import OccupancyMap
 
 
 def obstacle_mask(grid: OccupancyMap, occupied_value: int = 50, unknown_is_obstacle: bool = True) -> np.ndarray:

@@ -8,6 +8,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from cnr_maps.pose import Pose2D, wrap_angle  # noqa: F401 (Pose2D: the type integrate() works on)
+
 
 @dataclass
 class BaseLimits:
@@ -28,30 +30,6 @@ class BaseLimits:
     max_angular_accel: float = 2.0
     wheel_separation: float = 0.230
     watchdog_timeout: float = 0.6
-
-
-@dataclass
-class Pose2D:
-    """A planar pose [m, m, rad]."""
-
-    x: float = 0.0
-    y: float = 0.0
-    yaw: float = 0.0
-
-    def compose(self, other: 'Pose2D') -> 'Pose2D':
-        """self ⊕ other (other expressed in self's frame)."""
-        c, s = math.cos(self.yaw), math.sin(self.yaw)
-        return Pose2D(self.x + c * other.x - s * other.y, self.y + s * other.x + c * other.y,
-                      wrap_angle(self.yaw + other.yaw))
-
-    def inverse(self) -> 'Pose2D':
-        c, s = math.cos(self.yaw), math.sin(self.yaw)
-        return Pose2D(-c * self.x - s * self.y, s * self.x - c * self.y, wrap_angle(-self.yaw))
-
-
-def wrap_angle(a: float) -> float:
-    """Angle wrapped to [-pi, pi)."""
-    return (a + math.pi) % (2.0 * math.pi) - math.pi
 
 
 def integrate(pose: Pose2D, v: float, w: float, dt: float) -> Pose2D:

@@ -1,7 +1,7 @@
 """Exact grid ray casting (Amanatides–Woo traversal), compiled with numba.
 
 ROS-free. The grid is a boolean obstacle array with row 0 at the bottom (y = origin y), as
-:class:`cnr_sim.core.mapio.OccupancyMap`. A ray stops at the boundary of the first obstacle cell it
+:class:`cnr_maps.mapio.OccupancyMap`. A ray stops at the boundary of the first obstacle cell it
 enters; a ray that leaves the map or reaches ``max_range`` returns ``inf``.
 """
 from __future__ import annotations

@@ -14,9 +14,10 @@ import numpy as np
 
 from cnr_sim.core.battery import BatteryModel
 from cnr_sim.core.collision import ClearanceField, obstacle_mask
-from cnr_sim.core.kinematics import BaseLimits, DiffDrive, Pose2D, integrate
+from cnr_maps.pose import Pose2D
+from cnr_sim.core.kinematics import BaseLimits, DiffDrive, integrate
 from cnr_sim.core.laser import FakeLaser, LaserConfig
-from cnr_sim.core.mapio import OccupancyMap
+from cnr_maps.mapio import OccupancyMap
 from cnr_sim.core.obstacles import MovingObstacle, positions
 
 

@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 from typing import Callable, Dict, List, Optional, Sequence
 
-from cnr_params import ConfigError
+from cnr_params import ConfigError, Section
 
 
 @dataclass(frozen=True)
@@ -87,7 +87,20 @@ POLICIES: Dict[str, Callable[[], GoalPolicy]] = {
 }
 
 
-def make_policy(name: str, source: str = 'global_goal_manager', field: str = 'policy') -> GoalPolicy:
+def make_policy(name: str, source: str, field: str) -> GoalPolicy:
     if name not in POLICIES:
         raise ConfigError(source, field, f"unknown policy '{name}' (expected one of: {', '.join(POLICIES)})")
     return POLICIES[name]()
+
+
+@dataclass
+class GoalManagerParams:
+    policy: GoalPolicy
+    frame_id: str
+
+
+def read_params(p: Section) -> GoalManagerParams:
+    """``global_goal_manager.policy`` (scenario file) and ``frame_id`` (config/global_goal_manager.yaml); no defaults."""
+    sec = p.section('global_goal_manager')
+    return GoalManagerParams(policy=make_policy(sec.string('policy'), p.source, sec.path('policy')),
+                             frame_id=p.string('frame_id'))

@@ -29,8 +29,8 @@ class HeatSource:
     y: float
     peak: float
     radius: float
-    start: float = 0.0
-    ramp: float = 0.0
+    start: float
+    ramp: float
 
     def level(self, t: float) -> float:
         if t < self.start:
@@ -57,11 +57,14 @@ class TemperatureField:
 
     @classmethod
     def from_section(cls, sec: Section) -> 'TemperatureField':
-        """Parse ``{ambient, sources: [{name, x, y, peak, radius, start, ramp}]}`` (errors name the field)."""
+        """Parse ``{ambient, sources: [{name, x, y, peak, radius, start, ramp}]}`` (all required; errors name the field).
+
+        The one parser of heat sources: kestrel_driver and the scenario check (cnr_mission) both use it.
+        """
         sources = []
-        for i, s in enumerate(sec.sections('sources')):
-            sources.append(HeatSource(name=s.string('name', f'source_{i}'), x=s.number('x'), y=s.number('y'),
+        for s in sec.sections('sources'):
+            sources.append(HeatSource(name=s.string('name'), x=s.number('x'), y=s.number('y'),
                                       peak=s.number('peak'), radius=s.number('radius', positive=True),
-                                      start=s.number('start', 0.0, nonnegative=True),
-                                      ramp=s.number('ramp', 0.0, nonnegative=True)))
+                                      start=s.number('start', nonnegative=True),
+                                      ramp=s.number('ramp', nonnegative=True)))
         return cls(ambient=sec.number('ambient'), sources=sources)

@@ -1,35 +1,19 @@
 """Per-cell monitoring state and the append-only measurement store (ROS-free).
 
-The store is a TSV file, one merged measurement per line, flushed and fsync'ed per line, in the
-thesis's tab-separated format (measurement number, time, position, temperature, cell):
-
-    measurement  time  x  y  temperature  cell  row  col  pose_time
-
-On start the file is read back to rebuild every cell's state, so a restart loses nothing. A
-truncated last line (a crash while writing) is skipped with a warning and never truncated further:
-new lines start on a fresh line.
+The store is a TSV file in the format of :mod:`cnr_maps.measurements` (the thesis's tab-separated columns),
+one merged measurement per line, flushed and fsync'ed per line. On start the file is read back to rebuild
+every cell's state, so a restart loses nothing. A truncated last line (a crash while writing) is skipped with
+a warning and never truncated further: new lines start on a fresh line.
 """
 from __future__ import annotations
 
 import math
 import os
 from dataclasses import dataclass, field
-from typing import Callable, List, Optional, Tuple
+from typing import Callable, List, Optional
 
-from local_mapcell_manager.core.grid import MapcellGrid
-
-HEADER = ['measurement', 'time', 'x', 'y', 'temperature', 'cell', 'row', 'col', 'pose_time']
-
-
-@dataclass
-class Measurement:
-    number: int
-    time: float
-    x: float
-    y: float
-    temperature: float
-    cell: int
-    pose_time: float
+from cnr_maps.grid import MapcellGrid
+from cnr_maps.measurements import HEADER_LINE, Measurement, format_row, is_header, parse_row
 
 
 @dataclass
@@ -71,6 +55,15 @@ class CellBook:
         self.current: Optional[int] = None
         self.count = 0
 
+    def new_measurement(self, time: float, x: float, y: float, temperature: float,
+                        pose_time: float) -> Optional[Measurement]:
+        """The next numbered measurement with its cell assigned, or None outside the grid."""
+        cell = self.grid.index_of(x, y)
+        if cell is None:
+            return None
+        row, col = self.grid.row_col(cell)
+        return Measurement(self.count + 1, time, x, y, temperature, cell, row, col, pose_time)
+
     def add(self, m: Measurement) -> None:
         if m.cell != self.current:
             self.states[m.cell].visit_count += 1
@@ -99,7 +92,7 @@ class MeasurementStore:
         self._needs_newline = False
         if not os.path.exists(path) or os.path.getsize(path) == 0:
             with open(path, 'w') as f:
-                f.write('\t'.join(HEADER) + '\n')
+                f.write(HEADER_LINE)
                 f.flush()
                 os.fsync(f.fileno())
         else:
@@ -116,30 +109,23 @@ class MeasurementStore:
         if lines[-1]:
             self.warn(f'{self.path}: ignoring an incomplete last line (interrupted write): {lines[-1][:60]!r}')
         for no, line in enumerate(complete, 1):
-            if not line or line.startswith('measurement'):
+            if not line or is_header(line):
                 continue
-            parts = line.split('\t')
             try:
-                if len(parts) != len(HEADER):
-                    raise ValueError(f'{len(parts)} fields')
-                m = Measurement(int(parts[0]), float(parts[1]), float(parts[2]), float(parts[3]), float(parts[4]),
-                                int(parts[5]), float(parts[8]))
-                if not 0 <= m.cell < len(grid):
-                    raise ValueError(f'cell {m.cell} outside the grid')
+                m = parse_row(line)
+                if not 0 <= m.cell < len(grid) or grid.row_col(m.cell) != (m.row, m.col):
+                    raise ValueError(f'cell {m.cell} (row {m.row}, col {m.col}) is not a cell of the grid')
             except ValueError as exc:
                 self.warn(f'{self.path}:{no}: ignoring a malformed line ({exc})')
                 continue
             out.append(m)
         return out
 
-    def append(self, m: Measurement, grid: MapcellGrid) -> None:
-        row, col = divmod(m.cell, grid.cols)
-        line = '\t'.join([str(m.number), f'{m.time:.6f}', f'{m.x:.4f}', f'{m.y:.4f}', f'{m.temperature:.4f}',
-                          str(m.cell), str(row), str(col), f'{m.pose_time:.6f}']) + '\n'
+    def append(self, m: Measurement) -> None:
         with open(self.path, 'a') as f:
             if self._needs_newline:
                 f.write('\n')
                 self._needs_newline = False
-            f.write(line)
+            f.write(format_row(m))
             f.flush()
             os.fsync(f.fileno())

@@ -16,18 +16,18 @@ MODES = ('ambient', 'statistics')
 
 @dataclass
 class DetectorConfig:
-    mode: str = 'ambient'
-    ambient: float = 22.0
-    delta: float = 2.0
-    z: float = 3.0
-    min_samples: int = 20
+    mode: str
+    ambient: float          # degC
+    delta: float            # degC
+    z: float                # standard deviations
+    min_samples: int
 
     @classmethod
     def from_section(cls, sec: Section) -> 'DetectorConfig':
-        cfg = cls(mode=sec.string('mode', 'ambient', choices=MODES), ambient=sec.number('ambient', 22.0),
-                  delta=sec.number('delta', 2.0, positive=True), z=sec.number('z', 3.0, positive=True),
-                  min_samples=sec.integer('min_samples', 20, minimum=2))
-        return cfg
+        """Parse ``{mode, ambient, delta, z, min_samples}`` (every field required; errors name it)."""
+        return cls(mode=sec.string('mode', choices=MODES), ambient=sec.number('ambient'),
+                   delta=sec.number('delta', positive=True), z=sec.number('z', positive=True),
+                   min_samples=sec.integer('min_samples', minimum=2))
 
 
 class Detector:

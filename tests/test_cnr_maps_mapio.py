@@ -4,7 +4,7 @@ import pytest
 from PIL import Image
 
 from cnr_params import ConfigError
-from cnr_sim.core.mapio import load_map, pixels_to_occupancy
+from cnr_maps.mapio import load_map, pixels_to_occupancy
 
 
 def write_map(tmp_path, pixels, yaml_text=None, name='m', fmt='pgm', **keys):

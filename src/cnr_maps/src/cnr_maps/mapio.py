@@ -68,6 +68,20 @@ class OccupancyMap:
         row, col = self.world_to_cell(x, y)
         return bool(0 <= row < self.height and 0 <= col < self.width)
 
+    def point_problem(self, x: float, y: float) -> str:
+        """Why (x, y) is not a free point of the map ('' if it is): not finite, outside, occupied or unknown cell."""
+        if not (math.isfinite(x) and math.isfinite(y)):
+            return 'not finite'
+        if not self.contains(x, y):
+            return 'outside the map'
+        row, col = self.world_to_cell(x, y)
+        value = int(self.data[row, col])
+        if value == UNKNOWN:
+            return 'on an unknown map cell'
+        if value != FREE:
+            return f'on an occupied map cell (value {value})'
+        return ''
+
     def bounds(self) -> Tuple[float, float, float, float]:
         """(x_min, y_min, x_max, y_max) of the map in metres."""
         x0, y0 = self.origin[0], self.origin[1]
@@ -141,7 +155,7 @@ def load_map(yaml_path: str) -> OccupancyMap:
     free = sec.number('free_thresh', minimum=0.0, maximum=1.0)
     if not free < occ:
         raise sec.error('free_thresh', f'must be below occupied_thresh ({occ}), got {free}')
-    mode = sec.string('mode', 'trinary', choices=MODES)
+    mode = sec.string('mode', 'trinary', choices=MODES)       # optional in map_server's format (its default)
     image = sec.string('image')
     if not image:
         raise sec.error('image', 'empty file name')

@@ -1,0 +1,38 @@
+"""local_mapcell_manager's parameters, read from a :class:`cnr_params.Section` (ROS-free, no defaults in code).
+
+The defaults live in ``config/local_mapcell_manager.yaml``; the grid comes from the scenario's ``mapcells``;
+``store`` and ``map_file`` are set by mission.launch.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+from cnr_maps.grid import MapcellGrid
+from cnr_maps.mapio import OccupancyMap, load_map
+from cnr_params import Section
+
+
+@dataclass
+class ManagerParams:
+    grid: MapcellGrid
+    store: str
+    reset_store: bool
+    map_file: str
+    publish_period: float
+    frame_id: str
+
+
+def read_grid(p: Section, occupancy: OccupancyMap) -> MapcellGrid:
+    """The scenario's ``mapcells`` grid, checked to lie inside the map (the scenario check uses it too)."""
+    grid = MapcellGrid.from_section(p.section('mapcells'))
+    grid.check_inside(occupancy.bounds(), p.source, p.path('mapcells'))
+    return grid
+
+
+def read_params(p: Section) -> ManagerParams:
+    map_file = p.file_path('map_file')
+    return ManagerParams(grid=read_grid(p, load_map(map_file)), store=os.path.expanduser(p.string('store')),
+                         reset_store=p.boolean('reset_store'), map_file=map_file,
+                         publish_period=1.0 / p.number('max_publish_rate', positive=True),
+                         frame_id=p.string('frame_id'))
