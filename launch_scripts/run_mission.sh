@@ -30,25 +30,9 @@ esac
 [ -f "$scenario_file" ] || cnr_die "scenario not found: $scenario_file (see config/scenarios/)"
 "$CNR_WS/launch_scripts/setup.sh"
 cnr_source_ws
-# map and start pose of the scenario (roslaunch cannot read them from YAML)
-read -r name map x y a < <(/usr/bin/python3 - "$scenario_file" "$CNR_WS/maps" <<'PY'
-import os, sys
-import cnr_params
-from cnr_params import Section
-try:
-    s = Section.from_file(sys.argv[1]).section('scenario')
-    name = s.string('name')
-    m = s.string('map')
-    m = m if os.path.isabs(m) else os.path.join(sys.argv[2], m)
-    if not os.path.isfile(m):
-        raise s.error('map', f'file not found: {m}')
-    x, y, a = s.vector('start', 3)
-    print(name, m, x, y, a)
-except cnr_params.ConfigError as exc:
-    print(f'run_mission.sh: {exc}', file=sys.stderr)
-    sys.exit(2)
-PY
-) || exit 2
+# the whole scenario is checked before anything is launched (each node's own parameter rules): one line
+# naming file and field and exit 2 on a problem; on success: name, map (absolute path), start x y yaw
+read -r name map x y a < <(rosrun cnr_mission check_scenario "$scenario_file") || exit 2
 [ -n "$report" ] || report="$CNR_WS/reports/$name-$(date +%Y%m%d-%H%M%S)"
 mkdir -p "$report"
 cnr_master_uri "" "$port"
