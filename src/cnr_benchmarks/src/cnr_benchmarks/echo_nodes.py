@@ -65,7 +65,7 @@ class _TopicProbe:
 
 @exit_on_config_error
 def client_main() -> None:
-    rospy.init_node('echo_client')
+    init_node('echo_client')
     p = private_section('~')
     mode = p.string('mode', 'topic', choices=MODES)
     samples = p.integer('samples', 20, minimum=1)

@@ -26,7 +26,7 @@ from cnr_mission.core.scenario import read_mission
 from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, SearchState
 from cnr_msgs.srv import GetMeasurements
 from cnr_params import ConfigError
-from cnr_params.ros import private_section
+from cnr_params.ros import init_node, private_section
 from kestrel_driver.core.field import TemperatureField
 
 
@@ -161,7 +161,7 @@ class MissionMonitor:
 
 @cnr_params.exit_on_config_error
 def main() -> None:
-    rospy.init_node('mission_monitor')
+    init_node('mission_monitor')
     mon = MissionMonitor()
     found = mon.wait()
     if rospy.is_shutdown():

@@ -16,6 +16,7 @@ from typing import List
 
 import cnr_params
 from cnr_params import ConfigError, Section
+from cnr_params.ros import init_node
 
 
 @dataclass
@@ -75,7 +76,7 @@ def main() -> None:
     import actionlib
     from actionlib_msgs.msg import GoalStatus
     from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
-    rospy.init_node('goal_sequencer', anonymous=True)
+    init_node('goal_sequencer', anonymous=True)
     client = actionlib.SimpleActionClient('move_base', MoveBaseAction)
     print(f'goal_sequencer: waiting for the move_base action server ({client.action_client.ns})', flush=True)
     if not wait_for_server(client, args.server_timeout):

@@ -17,12 +17,14 @@ def private_section(namespace: str = '~') -> Section:
 
 
 def init_node(name: str, **kwargs) -> None:
-    """``rospy.init_node`` with SIGINT/SIGTERM handled off the main thread.
+    """``rospy.init_node`` with SIGINT/SIGTERM handled off the main thread; every node of the workspace uses it.
 
     rospy's own handler runs the shutdown (unregistering from the master) inside the signal handler, on the
     main thread. If the signal lands while that thread is in a master call, rospy's master proxy lock is
     already held and the node deadlocks until SIGKILL (seen with move_base stopped during its start-up over a
-    slow link). Here the handler only starts a thread that calls ``rospy.signal_shutdown``.
+    slow link), and the simulator, interrupted while publishing under its own lock, needed roslaunch's SIGKILL.
+    Here the handler only starts a thread that calls ``rospy.signal_shutdown``, so every node stops on
+    SIGINT within a loop period (tests/test_launch_lifecycle.py).
     """
     import signal
     import threading

@@ -12,6 +12,7 @@ from nav_msgs.msg import MapMetaData, OccupancyGrid
 from nav_msgs.srv import GetMap, GetMapResponse
 
 import cnr_params
+from cnr_params.ros import init_node
 from cnr_maps.mapio import OccupancyMap, load_map
 from cnr_sim.node import yaw_quaternion
 
@@ -36,7 +37,7 @@ def occupancy_grid(grid: OccupancyMap, frame_id: str, stamp) -> OccupancyGrid:
 @cnr_params.exit_on_config_error
 def main() -> None:
     argv = rospy.myargv(sys.argv)
-    rospy.init_node('map_server')
+    init_node('map_server')
     path = argv[1] if len(argv) > 1 else rospy.get_param('~map_file', '')
     if not path:
         raise cnr_params.ConfigError(rospy.get_name(), 'map_file', 'no map given (usage: map_server MAP.yaml)')

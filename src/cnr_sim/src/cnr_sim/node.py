@@ -28,7 +28,7 @@ from cnr_maps.mapio import load_map
 from cnr_maps.pose import Pose2D, yaw_to_quaternion
 from cnr_msgs.msg import Collision
 from cnr_msgs.srv import Teleport, TeleportResponse
-from cnr_params.ros import private_section
+from cnr_params.ros import init_node, private_section
 from cnr_sim.core.battery import BatteryModel, CpuMeter, NetMeter
 from cnr_sim.core.world import World
 from cnr_sim.params import SimulatorParams, read_params
@@ -304,7 +304,7 @@ def _point(x: float, y: float):
 
 @cnr_params.exit_on_config_error
 def main() -> None:
-    rospy.init_node('simulator')
+    init_node('simulator')
     params = read_params(private_section('~'))
     node = SimulatorNode(params)
     node.run()

@@ -12,7 +12,7 @@ from cnr_maps.grid import MapcellGrid
 from cnr_maps.pose import yaw_to_quaternion
 from cnr_msgs.msg import CellStates
 from cnr_msgs.srv import NextGoal, NextGoalResponse
-from cnr_params.ros import private_section
+from cnr_params.ros import init_node, private_section
 from global_goal_manager.core.policies import CellView, GoalManagerParams, read_params
 
 
@@ -57,6 +57,6 @@ class GoalManagerNode:
 
 @cnr_params.exit_on_config_error
 def main() -> None:
-    rospy.init_node('global_goal_manager')
+    init_node('global_goal_manager')
     GoalManagerNode(read_params(private_section('~')))
     rospy.spin()

@@ -18,7 +18,7 @@ from sensor_msgs.msg import Temperature
 
 import cnr_params
 from cnr_params import Section
-from cnr_params.ros import private_section
+from cnr_params.ros import init_node, private_section
 from kestrel_driver.core.field import TemperatureField
 from kestrel_driver.core.parser import ParseError, parse_line
 from kestrel_driver.core.sensor import LagCorrector, LaggedSensor
@@ -154,7 +154,7 @@ class KestrelNode:
 
 @cnr_params.exit_on_config_error
 def main() -> None:
-    rospy.init_node('kestrel_driver')
+    init_node('kestrel_driver')
     params = read_params(private_section('~'))
     node = KestrelNode(params)
     if params.mode == 'sim':

@@ -14,7 +14,7 @@ from cnr_msgs.srv import (GetCell, GetCellResponse, GetCellStates, GetCellStates
                           GetMeasurementsResponse)
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.measurements import Measurement
-from cnr_params.ros import private_section
+from cnr_params.ros import init_node, private_section
 from local_mapcell_manager.core.params import ManagerParams, read_params
 from local_mapcell_manager.core.store import CellBook, MeasurementStore
 
@@ -112,6 +112,6 @@ class ManagerNode:
 
 @cnr_params.exit_on_config_error
 def main() -> None:
-    rospy.init_node('local_mapcell_manager')
+    init_node('local_mapcell_manager')
     ManagerNode(read_params(private_section('~')))
     rospy.spin()

@@ -15,7 +15,7 @@ import cnr_params
 from cnr_maps.pose import quaternion_to_yaw
 from cnr_msgs.msg import MergedMeasurement
 from cnr_params import Section
-from cnr_params.ros import private_section
+from cnr_params.ros import init_node, private_section
 from merger.core.nearest import NearestMerger
 
 
@@ -94,6 +94,6 @@ class MergerNode:
 
 @cnr_params.exit_on_config_error
 def main() -> None:
-    rospy.init_node('merger')
+    init_node('merger')
     MergerNode(read_params(private_section('~')))
     rospy.spin()

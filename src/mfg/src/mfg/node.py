@@ -23,7 +23,7 @@ from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, SearchState
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.pose import yaw_to_quaternion
 from cnr_msgs.srv import NextGoal
-from cnr_params.ros import private_section
+from cnr_params.ros import init_node, private_section
 from mfg.core.detector import Detector
 from mfg.core.params import MfgParams, read_params
 from mfg.core.search import HotspotSearch
@@ -145,7 +145,7 @@ class MfgNode:
         self.publish_state('PATROL', f'global goal: cell {cell.index} (col {cell.col}, row {cell.row}) at '
                                      f'({cell.center_x:.1f}, {cell.center_y:.1f}) [{res.policy}]', goal_cell=cell.index)
         outcome = self.drive(cell.center_x, cell.center_y, interruptible=True)
-        if outcome == 'failed':
+        if outcome == 'failed' and not rospy.is_shutdown():     # a goal cancelled by our own shutdown is no news
             rospy.logwarn(f'global goal cell {cell.index} not reached')
 
     def search(self) -> None:
@@ -211,7 +211,7 @@ class MfgNode:
 
 @cnr_params.exit_on_config_error
 def main() -> None:
-    rospy.init_node('mfg')
+    init_node('mfg')
     node = MfgNode(read_params(private_section('~')))
     try:
         node.run()
