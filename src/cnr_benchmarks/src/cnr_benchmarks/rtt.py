@@ -47,7 +47,8 @@ BRIDGE_SETTINGS = dict(allow_topics=['/rtt/*'], allow_services=['/rtt/*'])
 
 def run_placement(tb, name: str, rtts: List[float], samples: int, interval: float, log: report.TsvLog,
                   work: str, secret: str) -> List[Dict]:
-    from cnr_testbed.rosside import RosSide, start_bridge, wait_until
+    from cnr_harness import wait_until
+    from cnr_testbed.rosside import RosSide, start_bridge
     masters, client_master, monitor_host, monitor_master = PLACEMENTS[name]
     port = 11411
     sides = {m: RosSide(tb, m, m, port, log_dir=work) for m in masters}
