@@ -23,7 +23,7 @@ while [ $# -gt 0 ]; do
     --no-nav) nav="false"; shift ;;
     --controller-frequency) rate="${2:?}"; shift 2 ;;
     --) shift; extra=("$@"); break ;;
-    -h|--help) awk 'NR>1 && /^#/ {sub(/^# ?/, ""); print; next} NR>1 {exit}' "$0"; exit 0 ;;
+    -h|--help) cnr_help; exit 0 ;;
     *) cnr_die "unknown argument '$1' (see --help)" ;;
   esac
 done

@@ -13,7 +13,7 @@ while [ $# -gt 0 ]; do
     --host) host="${2:?}"; shift 2 ;;
     --port) port="${2:?}"; shift 2 ;;
     --goals) goals="$(realpath -m "${2:?}")"; shift 2 ;;
-    -h|--help) awk 'NR>1 && /^#/ {sub(/^# ?/, ""); print; next} NR>1 {exit}' "$0"; exit 0 ;;
+    -h|--help) cnr_help; exit 0 ;;
     *) [ $# -ge 3 ] || cnr_die "expected X Y YAW or --goals FILE (see --help)"; single=("$1" "$2" "$3"); shift 3 ;;
   esac
 done
