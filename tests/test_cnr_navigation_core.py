@@ -116,3 +116,9 @@ def test_dwa_avoids_an_obstacle_seen_by_the_laser():
         assert np.all(costs < INSCRIBED_INFLATED_OBSTACLE)
     else:
         assert res.mode in ('failed', 'stop')
+
+
+def test_readme_parameter_tables_are_the_generated_ones(workspace):
+    from cnr_navigation.core.param_docs import markdown_tables
+    with open(f'{workspace}/src/cnr_navigation/README.md') as f:
+        assert markdown_tables().strip() in f.read(), 'regenerate: python3 -m cnr_navigation.core.param_docs'

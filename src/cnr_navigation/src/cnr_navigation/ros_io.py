@@ -16,7 +16,7 @@ from cnr_navigation.core.geometry import Pose2D, quaternion_to_yaw, yaw_to_quate
 
 
 class RosParamReader:
-    """:class:`cnr_navigation.core.params.ParamReader` on the parameter server, one XML-RPC call each.
+    """:class:`cnr_navigation.core.param_reader.ParamReader` on the parameter server, one XML-RPC call each.
 
     ``calls`` counts the calls by kind (getParam, hasParam, searchParam, setParam).
     """

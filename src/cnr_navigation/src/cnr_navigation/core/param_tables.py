@@ -1,0 +1,285 @@
+"""move_base's parameter tree declared once: name, type, move_base's code default, range, description (ROS-free).
+
+The groups mirror navigation@noetic-devel: the reconfigurable ones (:data:`RECONFIGURABLE`, one
+dynamic_reconfigure server each, as the ``.cfg`` files of noetic) and those read once. Used by
+:mod:`cnr_navigation.core.param_reader` (reading and validation), :mod:`cnr_navigation.reconfigure_cfg`
+(the ``cfg/*.cfg`` scripts) and :mod:`cnr_navigation.core.param_docs` (the README tables).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Dict, List, Optional, Tuple
+
+
+@dataclass(frozen=True)
+class Param:
+    """One declared parameter.
+
+    Attributes:
+        name: name relative to its namespace.
+        kind: 'double', 'int', 'bool' or 'str'.
+        default: code default.
+        description: one line, with the unit.
+        minimum / maximum: range for dynamic_reconfigure and validation (None: unbounded).
+    """
+
+    name: str
+    kind: str
+    default: Any
+    description: str
+    minimum: Optional[float] = None
+    maximum: Optional[float] = None
+
+
+def _d(name: str, default: float, description: str, minimum: Optional[float] = None,
+       maximum: Optional[float] = None) -> Param:
+    return Param(name, 'double', default, description, minimum, maximum)
+
+
+def _i(name: str, default: int, description: str, minimum: Optional[float] = None,
+       maximum: Optional[float] = None) -> Param:
+    return Param(name, 'int', default, description, minimum, maximum)
+
+
+def _b(name: str, default: bool, description: str) -> Param:
+    return Param(name, 'bool', default, description)
+
+
+def _s(name: str, default: str, description: str) -> Param:
+    return Param(name, 'str', default, description)
+
+
+# ---------------------------------------------------------------------------------------------
+# reconfigurable groups (one dynamic_reconfigure server each), as the .cfg files of noetic
+
+MOVE_BASE_CFG: List[Param] = [
+    _s('base_global_planner', 'navfn/NavfnROS', 'The name of the plugin for the global planner to use with move_base.'),
+    _s('base_local_planner', 'base_local_planner/TrajectoryPlannerROS',
+       'The name of the plugin for the local planner to use with move_base.'),
+    _d('planner_frequency', 0.0, 'The rate in Hz at which to run the planning loop.', 0, 100),
+    _d('controller_frequency', 20.0, 'The rate in Hz at which to run the control loop and send velocity commands '
+       'to the base.', 0, 100),
+    _d('planner_patience', 5.0, 'How long the planner will wait in seconds in an attempt to find a valid plan '
+       'before space-clearing operations are performed.', 0, 100),
+    _d('controller_patience', 15.0, 'How long the controller will wait in seconds without receiving a valid '
+       'control before space-clearing operations are performed.', 0, 100),
+    _i('max_planning_retries', -1, 'How many times we will recall the planner in an attempt to find a valid plan '
+       'before space-clearing operations are performed', -1, 1000),
+    _d('conservative_reset_dist', 3.0, 'The distance away from the robot in meters at which obstacles will be '
+       'cleared from the costmap when attempting to clear space in the map.', 0, 50),
+    _b('recovery_behavior_enabled', True, 'Whether or not to enable the move_base recovery behaviors to attempt '
+       'to clear out space.'),
+    _b('clearing_rotation_allowed', True, 'Determines whether or not the robot will attempt an in-place rotation '
+       'when attempting to clear out space.'),
+    _b('shutdown_costmaps', False, 'Determines whether or not to shutdown the costmaps of the node when move_base '
+       'is in an inactive state'),
+    _d('oscillation_timeout', 0.0, 'How long in seconds to allow for oscillation before executing recovery '
+       'behaviors.', 0, 60),
+    _d('oscillation_distance', 0.5, 'How far in meters the robot must move to be considered not to be '
+       'oscillating.', 0, 10),
+    _b('make_plan_clear_costmap', True, 'Whether or not to clear the global costmap on make_plan service call.'),
+    _b('make_plan_add_unreachable_goal', True, 'Whether or not to add the original goal to the path if it is '
+       'unreachable in the make_plan service call.'),
+    _b('restore_defaults', False, 'Restore to the original configuration'),
+]
+
+COSTMAP_CFG: List[Param] = [
+    _d('transform_tolerance', 0.3, 'Specifies the delay in transform (tf) data that is tolerable in seconds.', 0, 10),
+    _d('update_frequency', 5.0, 'The frequency in Hz for the map to be updated.', 0, 100),
+    _d('publish_frequency', 0.0, 'The frequency in Hz for the map to be publish display information.', 0, 100),
+    # costmap_2d declares width/height as int_t [m]; doubles here so a 4.0 m window loads as it does in C++
+    _d('width', 10.0, 'The width of the map in meters.', 0, None),
+    _d('height', 10.0, 'The height of the map in meters.', 0, None),
+    _d('resolution', 0.05, 'The resolution of the map in meters/cell.', 0, 50),
+    _d('origin_x', 0.0, 'The x origin of the map in the global frame in meters.'),
+    _d('origin_y', 0.0, 'The y origin of the map in the global frame in meters.'),
+    _s('footprint', '[]', 'The footprint of the robot specified in the robot_base_frame coordinate frame as a list '
+       'in the format: [ [x1, y1], [x2, y2], ...., [xn, yn] ].'),
+    _d('robot_radius', 0.46, 'The radius of the robot in meters, this parameter should only be set for circular '
+       'robots, all others should use the footprint parameter described above.', 0, 10),
+    _d('footprint_padding', 0.01, 'How much to pad (increase the size of) the footprint, in meters.'),
+]
+
+GENERIC_PLUGIN_CFG: List[Param] = [
+    _b('enabled', True, 'Whether to apply this plugin or not'),
+]
+
+OBSTACLE_PLUGIN_CFG: List[Param] = [
+    _b('enabled', True, 'Whether to apply this plugin or not'),
+    _b('footprint_clearing_enabled', True, 'Whether to clear the robot\'s footprint of lethal obstacles'),
+    _d('max_obstacle_height', 2.0, 'The maximum height of any obstacle to be inserted into the costmap in meters.',
+       0, 50),
+    _i('combination_method', 1, 'Method for combining two layers (0 overwrite, 1 maximum)', 0, 2),
+]
+
+INFLATION_PLUGIN_CFG: List[Param] = [
+    _b('enabled', True, 'Whether to apply this plugin or not'),
+    _d('cost_scaling_factor', 10.0, 'A scaling factor to apply to cost values during inflation.', 0, 100),
+    _d('inflation_radius', 0.55, 'The radius in meters to which the map inflates obstacle cost values.', 0, 50),
+    _b('inflate_unknown', False, 'Whether to inflate unknown cells.'),
+]
+
+DWA_CFG: List[Param] = [
+    _d('max_vel_trans', 0.55, 'The absolute value of the maximum translational velocity for the robot in m/s', 0),
+    _d('min_vel_trans', 0.1, 'The absolute value of the minimum translational velocity for the robot in m/s', 0),
+    _d('max_vel_x', 0.55, 'The maximum x velocity for the robot in m/s'),
+    _d('min_vel_x', 0.0, 'The minimum x velocity for the robot in m/s'),
+    _d('max_vel_y', 0.1, 'The maximum y velocity for the robot in m/s'),
+    _d('min_vel_y', -0.1, 'The minimum y velocity for the robot in m/s'),
+    _d('max_vel_theta', 1.0, 'The absolute value of the maximum rotational velocity for the robot in rad/s', 0),
+    _d('min_vel_theta', 0.4, 'The absolute value of the minimum rotational velocity for the robot in rad/s', 0),
+    _d('acc_lim_x', 2.5, 'The acceleration limit of the robot in the x direction', 0, 20),
+    _d('acc_lim_y', 2.5, 'The acceleration limit of the robot in the y direction', 0, 20),
+    _d('acc_lim_theta', 3.2, 'The acceleration limit of the robot in the theta direction', 0, 20),
+    _d('acc_lim_trans', 0.1, 'The absolute value of the maximum translational acceleration for the robot in m/s^2', 0),
+    _b('prune_plan', False, 'Start following closest point of global plan, not first point (if different).'),
+    _d('xy_goal_tolerance', 0.1, 'Within what maximum distance we consider the robot to be in goal'),
+    _d('yaw_goal_tolerance', 0.1, 'Within what maximum angle difference we consider the robot to face goal '
+       'direction'),
+    _d('trans_stopped_vel', 0.1, 'Below what maximum velocity we consider the robot to be stopped in translation'),
+    _d('theta_stopped_vel', 0.1, 'Below what maximum rotation velocity we consider the robot to be stopped in '
+       'rotation'),
+    _d('sim_time', 1.7, 'The amount of time to roll trajectories out for in seconds', 0),
+    _d('sim_granularity', 0.025, 'The granularity with which to check for collisions along each trajectory in '
+       'meters', 0),
+    _d('angular_sim_granularity', 0.1, 'The granularity with which to check for collisions for rotations in '
+       'radians', 0),
+    _d('path_distance_bias', 32.0, 'The weight for the path distance part of the cost function', 0.0),
+    _d('goal_distance_bias', 24.0, 'The weight for the goal distance part of the cost function', 0.0),
+    _d('occdist_scale', 0.01, 'The weight for the obstacle distance part of the cost function', 0.0),
+    _d('twirling_scale', 0.0, 'The weight for penalizing any changes in robot heading', 0.0),
+    _d('stop_time_buffer', 0.2, 'The amount of time that the robot must stop before a collision in order for a '
+       'trajectory to be considered valid in seconds', 0),
+    _d('oscillation_reset_dist', 0.05, 'The distance the robot must travel before oscillation flags are reset, in '
+       'meters', 0),
+    _d('oscillation_reset_angle', 0.2, 'The angle the robot must turn before oscillation flags are reset, in '
+       'radians', 0),
+    _d('forward_point_distance', 0.325, 'The distance from the center point of the robot to place an additional '
+       'scoring point, in meters'),
+    _d('scaling_speed', 0.25, 'The absolute value of the velocity at which to start scaling the robot\'s '
+       'footprint, in m/s', 0),
+    _d('max_scaling_factor', 0.2, 'The maximum factor to scale the robot\'s footprint by', 0),
+    _i('vx_samples', 3, 'The number of samples to use when exploring the x velocity space', 1),
+    _i('vy_samples', 10, 'The number of samples to use when exploring the y velocity space', 1),
+    _i('vth_samples', 20, 'The number of samples to use when exploring the theta velocity space', 1),
+    _b('use_dwa', True, 'Use dynamic window approach to constrain sampling velocities to small window.'),
+    _b('restore_defaults', False, 'Restore to the original configuration.'),
+]
+
+#: .cfg file stem -> (group, generated node name used by gen.generate)
+RECONFIGURABLE: Dict[str, Tuple[List[Param], str]] = {
+    'MoveBase': (MOVE_BASE_CFG, 'move_base'),
+    'Costmap2D': (COSTMAP_CFG, 'costmap_2d'),
+    'GenericPlugin': (GENERIC_PLUGIN_CFG, 'costmap_2d'),
+    'ObstaclePlugin': (OBSTACLE_PLUGIN_CFG, 'costmap_2d'),
+    'InflationPlugin': (INFLATION_PLUGIN_CFG, 'costmap_2d'),
+    'DWAPlanner': (DWA_CFG, 'dwa_local_planner'),
+}
+
+# ---------------------------------------------------------------------------------------------
+# parameters read directly (not reconfigurable), for the README and validation
+
+MOVE_BASE_DIRECT: List[Param] = [
+    _s('global_costmap/robot_base_frame', 'base_link', 'Robot frame used for goals and plans.'),
+    _s('global_costmap/global_frame', 'map', 'Frame of goals and global plans.'),
+    _d('local_costmap/inscribed_radius', 0.325, 'Read as move_base does; sets the default clearing_radius [m].', 0),
+    _d('local_costmap/circumscribed_radius', 0.46, 'Read as move_base does; aggressive_reset clears beyond 4x this '
+       '[m].', 0),
+    _d('clearing_radius', 0.46, 'Half side of the window cleared around the robot before a make_plan request [m] '
+       '(default: circumscribed_radius).', 0),
+]
+
+COSTMAP_DIRECT: List[Param] = [
+    _s('global_frame', 'map', 'Frame of the costmap.'),
+    _s('robot_base_frame', 'base_link', 'Frame of the robot base.'),
+    _b('rolling_window', False, 'The costmap is a window that follows the robot.'),
+    _b('track_unknown_space', False, 'Default for the layers\' track_unknown_space.'),
+    _b('always_send_full_costmap', False, 'Publish the whole costmap on every publish cycle (else costmap_updates).'),
+]
+
+STATIC_DIRECT: List[Param] = [
+    _s('map_topic', 'map', 'Topic of the static map (nav_msgs/OccupancyGrid).'),
+    _b('first_map_only', False, 'Use only the first map received.'),
+    _b('subscribe_to_updates', False, 'Accepted; map updates (map_updates topic) are not subscribed.'),
+    _b('track_unknown_space', True, 'Unknown map cells are NO_INFORMATION (else free).'),
+    _b('use_maximum', False, 'Accepted; the static layer is always the base of the master grid.'),
+    _i('lethal_cost_threshold', 100, 'Map values at or above this are lethal.', 0, 255),
+    _i('unknown_cost_value', -1, 'Map value meaning unknown.', -1, 255),
+    _b('trinary_costmap', True, 'Map values are only free, lethal or unknown.'),
+]
+
+OBSTACLE_DIRECT: List[Param] = [
+    _b('track_unknown_space', False, 'Cells never observed are NO_INFORMATION (default: the costmap\'s).'),
+    _d('transform_tolerance', 0.2, 'Accepted; scans are transformed at their own stamps [s].', 0),
+    _s('observation_sources', '', 'Space-separated list of sources (each a sub-namespace).'),
+]
+
+SOURCE_DIRECT: List[Param] = [
+    _d('observation_persistence', 0.0, 'Accepted; each update uses the scans received since the last one [s].', 0),
+    _d('expected_update_rate', 0.0, 'Maximum age of the newest scan before the sensor is out of date [s] '
+       '(0: never).', 0),
+    _s('data_type', 'PointCloud', 'Must be LaserScan.'),
+    _d('min_obstacle_height', 0.0, 'Scans from sensors below this height do not mark [m].'),
+    _d('max_obstacle_height', 2.0, 'Scans from sensors above this height do not mark [m].'),
+    _b('inf_is_valid', False, 'Out-of-range readings clear along their whole beam.'),
+    _b('clearing', False, 'The source clears free space by raytracing.'),
+    _b('marking', True, 'The source marks obstacles.'),
+    _s('topic', '', 'Topic of the sensor_msgs/LaserScan (default: the source name).'),
+    _s('sensor_frame', '', 'Frame of the sensor (default: the scan\'s header frame).'),
+]
+SOURCE_SEARCHED: List[Param] = [
+    _d('obstacle_range', 2.5, 'Maximum range at which hits are marked [m] (searched upwards).', 0),
+    _d('raytrace_range', 3.0, 'Maximum range cleared by raytracing [m] (searched upwards).', 0),
+]
+
+NAVFN_DIRECT: List[Param] = [
+    _b('visualize_potential', False, 'Accepted; no potential field is published.'),
+    _b('allow_unknown', True, 'Plan through unknown space and accept goals in it.'),
+    _d('planner_window_x', 0.0, 'Accepted; the whole costmap is searched [m].'),
+    _d('planner_window_y', 0.0, 'Accepted; the whole costmap is searched [m].'),
+    _d('default_tolerance', 0.0, 'Accept the reachable cell nearest to an unreachable goal within this [m].', 0),
+]
+
+DWA_DIRECT: List[Param] = [
+    _b('sum_scores', False, 'Obstacle cost of a trajectory is the sum of its cell costs (else the maximum).'),
+    _b('publish_cost_grid_pc', False, 'Accepted; no cost grid cloud is published.'),
+    _s('global_frame_id', 'odom', 'Frame of the trajectory cloud.'),
+    _b('publish_traj_pc', False, 'Publish the scored trajectories as trajectory_cloud (sensor_msgs/PointCloud2).'),
+    _d('cheat_factor', 1.0, 'Scale of the distance to the goal below which the nose is no longer kept on the path.',
+       0),
+    _b('latch_xy_goal_tolerance', False, 'Once within xy_goal_tolerance, only rotate even if the robot drifts out.'),
+]
+#: DWAPlannerROS warns when the pre-Noetic name is set (``warnRenamedParameter``): new -> old
+DWA_RENAMED: List[Tuple[str, str]] = [
+    ('max_vel_trans', 'max_trans_vel'), ('min_vel_trans', 'min_trans_vel'), ('max_vel_theta', 'max_rot_vel'),
+    ('min_vel_theta', 'min_rot_vel'), ('acc_lim_trans', 'acc_limit_trans'), ('theta_stopped_vel', 'rot_stopped_vel'),
+]
+
+CLEAR_RECOVERY_DIRECT: List[Param] = [
+    _d('reset_distance', 3.0, 'Side of the square around the robot outside which layers are reset [m].', 0),
+    _b('invert_area_to_clear', False, 'Reset inside the square instead.'),
+    _b('force_updating', False, 'Accepted; the costmaps are recomputed right after clearing anyway.'),
+    _s('affected_maps', 'both', 'global, local or both.'),
+]
+ROTATE_RECOVERY_DIRECT: List[Param] = [
+    _d('sim_granularity', 0.017, 'Angular step of the collision check [rad].', 0),
+    _d('frequency', 20.0, 'Accepted; the rotation is commanded at the controller frequency [Hz].', 0),
+]
+#: RotateRecovery reads these from ~TrajectoryPlannerROS with loadParameterWithDeprecation: (current, old, default)
+ROTATE_BLP: List[Tuple[str, str, float]] = [
+    ('acc_lim_theta', 'acc_lim_th', 3.2), ('max_vel_theta', 'max_rotational_vel', 1.0),
+    ('min_in_place_vel_theta', 'min_in_place_rotational_vel', 0.4),
+]
+
+_ROBOT_RADIUS = next(p for p in COSTMAP_CFG if p.name == 'robot_radius')
+
+PLUGIN_TYPES = {
+    'costmap_2d::StaticLayer': 'static',
+    'costmap_2d::ObstacleLayer': 'obstacle',
+    'costmap_2d::VoxelLayer': 'obstacle',     # treated as a 2-D obstacle layer
+    'costmap_2d::InflationLayer': 'inflation',
+}
+ClearTypes = ('clear_costmap_recovery/ClearCostmapRecovery',)
+RotateTypes = ('rotate_recovery/RotateRecovery',)
+GLOBAL_PLANNERS = ('navfn/NavfnROS',)                      # the MCP planner stands in for navfn
+LOCAL_PLANNERS = ('dwa_local_planner/DWAPlannerROS',)       # the vectorised DWA controller
