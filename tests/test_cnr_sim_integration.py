@@ -1,5 +1,6 @@
 """The simulator with a real rosmaster: rates, tf, watchdog, collisions, services, bad input."""
 import math
+import os
 import subprocess
 import threading
 
@@ -156,12 +157,34 @@ def test_teleport_rejects_outside_map(sim):
     assert teleport(0.5, 0.0, 0.0).success
 
 
-def test_bad_map_file_exits_2_with_one_line(ros, tmp_path):
+def run_simulator(ros, workspace, name, **values):
+    """``rosrun cnr_sim simulator`` with config/ loaded as simulator.launch loads it, changed by ``values``."""
+    from cnr_sim.params import config_section
+    data = config_section(os.path.join(workspace, 'config'), real_time_factor=1.0, initial_pose=[0.5, 0.0, 0.0],
+                          **values).data
+    for key in [k for k, v in values.items() if v is None]:
+        del data[key]
+    ros.master.call('setParam', f'/{name}', data)
+    try:
+        return subprocess.run(['rosrun', 'cnr_sim', 'simulator', f'__name:={name}'], env=ros.master.env,
+                              capture_output=True, text=True, timeout=60)
+    finally:
+        ros.master.call('deleteParam', f'/{name}')
+
+
+def test_bad_map_file_exits_2_with_one_line(ros, tmp_path, workspace):
     bad = tmp_path / 'bad.yaml'
     bad.write_text('image: none.pgm\nresolution: -1\norigin: [0, 0, 0]\nnegate: 0\n'
                    'occupied_thresh: 0.65\nfree_thresh: 0.196\n')
-    r = subprocess.run(['rosrun', 'cnr_sim', 'simulator', '__name:=bad_sim', f'_map_file:={bad}'],
-                       env=ros.master.env, capture_output=True, text=True, timeout=60)
+    r = run_simulator(ros, workspace, 'bad_sim', map_file=str(bad))
     assert r.returncode == 2
     lines = [l for l in r.stderr.splitlines() if l.strip()]
     assert len(lines) == 1 and 'bad.yaml' in lines[0] and 'resolution' in lines[0], r.stderr
+
+
+def test_missing_parameter_exits_2_naming_it(ros, workspace):
+    r = run_simulator(ros, workspace, 'incomplete_sim', map_file=os.path.join(workspace, 'maps', 'corridor.yaml'),
+                      seed=None)
+    assert r.returncode == 2
+    lines = [l for l in r.stderr.splitlines() if l.strip()]
+    assert len(lines) == 1 and '/incomplete_sim: seed: missing' in lines[0], r.stderr

@@ -14,17 +14,23 @@ import time
 import numpy as np
 
 from cnr_harness import RosMaster, wait_until
-from cnr_sim.core.kinematics import BaseLimits, Pose2D
-from cnr_sim.core.laser import LaserConfig
+from cnr_sim.core.kinematics import Pose2D
 from cnr_sim.core.mapio import load_map
-from cnr_sim.core.world import World, WorldConfig
+from cnr_sim.core.world import World
+from cnr_sim.params import config_section, read_laser, read_limits, read_world
 
 WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
 
 
+def turtlebot_world(map_yaml: str, start: Pose2D) -> World:
+    """The simulated TurtleBot 2 as config/ describes it (robot.yaml, laser.yaml)."""
+    sim = config_section(os.path.join(WS, 'config'))
+    return World(load_map(map_yaml), read_limits(sim), read_laser(sim), read_world(sim), start)
+
+
 def core_rtf(map_yaml: str, start: Pose2D, sim_seconds: float) -> tuple:
     """Real-time multiple of the world (50 Hz steps, 640-beam laser at 10 Hz, a driving robot)."""
-    world = World(load_map(map_yaml), BaseLimits(), LaserConfig(), WorldConfig(), start)
+    world = turtlebot_world(map_yaml, start)
     world.scan()                                     # compile / warm up
     steps = int(sim_seconds / world.config.step)
     rng = np.random.default_rng(1)
@@ -42,7 +48,7 @@ def core_rtf(map_yaml: str, start: Pose2D, sim_seconds: float) -> tuple:
 
 
 def scan_time(map_yaml: str, start: Pose2D, n: int = 2000) -> float:
-    world = World(load_map(map_yaml), BaseLimits(), LaserConfig(), WorldConfig(), start)
+    world = turtlebot_world(map_yaml, start)
     world.scan()
     t0 = time.perf_counter()
     for _ in range(n):
