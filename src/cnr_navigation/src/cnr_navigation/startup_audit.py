@@ -58,15 +58,13 @@ class RecordingProxy:
         self.server.shutdown()
 
 
-def load_navigation_params(master: xmlrpc.client.ServerProxy, node: str = '/move_base',
-                           controller_frequency: float = 5.0) -> None:
+def load_navigation_params(master: xmlrpc.client.ServerProxy, node: str = '/move_base') -> None:
     """Set move_base's parameters as move_base.launch does (rosparam load of config/navigation/*.yaml)."""
     for name, ns in NAV_FILES:
         with open(os.path.join(WS, 'config', 'navigation', name)) as f:
             data = yaml.safe_load(f) or {}
         for key, value in data.items():
             master.setParam('/audit', '/'.join(p for p in (node, ns, key) if p), value)
-    master.setParam('/audit', f'{node}/controller_frequency', controller_frequency)
 
 
 def audit(timeout: float = 120.0) -> dict:
