@@ -121,4 +121,53 @@ def test_dwa_avoids_an_obstacle_seen_by_the_laser():
 def test_readme_parameter_tables_are_the_generated_ones(workspace):
     from cnr_navigation.core.param_docs import markdown_tables
     with open(f'{workspace}/src/cnr_navigation/README.md') as f:
-        assert markdown_tables().strip() in f.read(), 'regenerate: python3 -m cnr_navigation.core.param_docs'
+        assert markdown_tables(f'{workspace}/config').strip() in f.read(), \
+            'regenerate: python3 -m cnr_navigation.core.param_docs config'
+
+
+class TreeReader:
+    """ParamReader over the parameters move_base.launch sets (no master)."""
+
+    def __init__(self, tree):
+        self.tree = tree
+
+    def get(self, name):
+        from cnr_navigation.core.param_reader import missing
+        if name not in self.tree:
+            raise missing(name)
+        return self.tree[name]
+
+    def get_optional(self, name):
+        return self.tree.get(name)
+
+    def has(self, name):
+        return name in self.tree
+
+    def search(self, namespace, key):
+        from cnr_navigation.core.param_files import search
+        return search(self.tree, namespace, key)
+
+    def set(self, name, value):
+        self.tree[name] = value
+
+
+def test_navigation_parameters_come_from_config_and_a_missing_one_is_named(workspace):
+    from cnr_params import ConfigError
+    from cnr_navigation.core.param_files import navigation_tree
+    from cnr_navigation.core.param_reader import read_navigation_params
+    tree = navigation_tree(f'{workspace}/config')
+    params = read_navigation_params(TreeReader(dict(tree)), '/move_base')
+    assert params.move_base.controller_frequency == 5.0 and params.dwa.sim_time == 1.0
+    assert params.local_costmap.config.width == 4.0 and params.clearing_radius == 0.46
+    assert params.global_costmap.map_topic == 'map' and params.local_costmap.sources[0].topic == 'scan'
+    for name, message in (('/move_base/DWAPlannerROS/sim_time', '/move_base/DWAPlannerROS: sim_time: missing'),
+                          ('/move_base/global_costmap/static_layer/map_topic',
+                           '/move_base/global_costmap/static_layer: map_topic: missing'),
+                          ('/move_base/TrajectoryPlannerROS/acc_lim_theta',
+                           '/move_base/TrajectoryPlannerROS: acc_lim_theta: missing'),
+                          ('/move_base/global_costmap/obstacle_layer/obstacle_range',
+                           'obstacle_range: missing \\(searched upwards')):
+        broken = {k: v for k, v in tree.items() if k != name}
+        assert len(broken) == len(tree) - 1
+        with pytest.raises(ConfigError, match=message):
+            read_navigation_params(TreeReader(broken), '/move_base')

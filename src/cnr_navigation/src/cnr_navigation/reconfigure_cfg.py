@@ -1,7 +1,9 @@
 """Body of the ``cfg/*.cfg`` scripts: a dynamic_reconfigure ParameterGenerator per reconfigurable group.
 
 Runs at build time under catkin's ``generate_dynamic_reconfigure_options``; the groups are declared in
-:mod:`cnr_navigation.core.param_tables`, so names, defaults and ranges agree with what the node reads.
+:mod:`cnr_navigation.core.param_tables`, so names and ranges agree with what the node reads. The default
+given to dynamic_reconfigure is move_base's documented one (``Param.upstream_default``); the servers start
+from the values the node read from config/navigation, which are all required.
 """
 from __future__ import annotations
 
@@ -24,5 +26,5 @@ def generate_cfg(stem: str) -> int:
                 kw['min'] = int(p.minimum) if p.kind == 'int' else float(p.minimum)
             if p.maximum is not None:
                 kw['max'] = int(p.maximum) if p.kind == 'int' else float(p.maximum)
-        gen.add(p.name, types[p.kind], 0, p.description, p.default, **kw)
+        gen.add(p.name, types[p.kind], 0, p.description, p.upstream_default, **kw)
     return gen.generate('cnr_navigation', node_name, stem)

@@ -19,13 +19,10 @@ import xmlrpc.client
 from socketserver import ThreadingMixIn
 from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
 
-import yaml
-
 from cnr_harness import RosMaster, wait_until
+from cnr_navigation.core.param_files import navigation_tree
+
 WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
-NAV_FILES = [('costmap_common.yaml', 'global_costmap'), ('costmap_common.yaml', 'local_costmap'),
-             ('local_costmap.yaml', ''), ('global_costmap.yaml', ''), ('dwa_local_planner.yaml', ''),
-             ('global_planner.yaml', ''), ('move_base.yaml', '')]
 
 PARAM_METHODS = {'getParam', 'hasParam', 'searchParam', 'setParam', 'subscribeParam', 'unsubscribeParam',
                  'deleteParam', 'getParamNames'}
@@ -60,11 +57,8 @@ class RecordingProxy:
 
 def load_navigation_params(master: xmlrpc.client.ServerProxy, node: str = '/move_base') -> None:
     """Set move_base's parameters as move_base.launch does (rosparam load of config/navigation/*.yaml)."""
-    for name, ns in NAV_FILES:
-        with open(os.path.join(WS, 'config', 'navigation', name)) as f:
-            data = yaml.safe_load(f) or {}
-        for key, value in data.items():
-            master.setParam('/audit', '/'.join(p for p in (node, ns, key) if p), value)
+    for name, value in navigation_tree(os.path.join(WS, 'config'), node).items():
+        master.setParam('/audit', name, value)
 
 
 def audit(timeout: float = 120.0) -> dict:

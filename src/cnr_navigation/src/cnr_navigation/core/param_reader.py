@@ -23,7 +23,8 @@ from cnr_navigation.core.param_tables import (
     CLEAR_RECOVERY_DIRECT, COSTMAP_CFG, COSTMAP_DIRECT, DWA_CFG, DWA_DIRECT, DWA_RENAMED, GENERIC_PLUGIN_CFG,
     GLOBAL_PLANNERS, INFLATION_PLUGIN_CFG, LOCAL_PLANNERS, MOVE_BASE_CFG, MOVE_BASE_DIRECT, NAVFN_DIRECT,
     OBSTACLE_DIRECT, OBSTACLE_PLUGIN_CFG, PLUGIN_TYPES, ROTATE_BLP, ROTATE_RECOVERY_DIRECT, SOURCE_DIRECT,
-    SOURCE_SEARCHED, STATIC_DIRECT, ClearTypes, Param, RotateTypes, _d, _ROBOT_RADIUS)
+    SOURCE_SEARCHED, STATIC_DIRECT, ClearTypes, Param, RotateTypes, _ROBOT_RADIUS, CONTROLLER_FREQUENCY,
+    ROTATE_BLP_TOLERANCE)
 from cnr_navigation.core.planner import PlannerConfig
 from cnr_navigation.core.recovery import ClearCostmapConfig, RotateConfig
 
@@ -31,8 +32,11 @@ from cnr_navigation.core.recovery import ClearCostmapConfig, RotateConfig
 class ParamReader(Protocol):
     """One master call per method call (rospy in the node, a dict in tests). Names are absolute."""
 
-    def get(self, name: str, default: Any) -> Any:
-        """getParam; ``default`` when the parameter is not set."""
+    def get(self, name: str) -> Any:
+        """getParam; raises :class:`cnr_params.ConfigError` naming the parameter when it is not set."""
+
+    def get_optional(self, name: str) -> Optional[Any]:
+        """getParam; None when the parameter is not set (for parameters whose absence has a meaning)."""
 
     def has(self, name: str) -> bool:
         """hasParam."""
@@ -78,14 +82,15 @@ def _join(ns: str, name: str) -> str:
     return f'{ns.rstrip("/")}/{name}'
 
 
-def read_group(reader: ParamReader, ns: str, params: Sequence[Param],
-               defaults: Optional[Dict[str, Any]] = None) -> Dict[str, Any]:
-    """Read each parameter of ``params`` under ``ns`` with one getParam, validated."""
-    out: Dict[str, Any] = {}
-    for p in params:
-        default = (defaults or {}).get(p.name, p.default)
-        out[p.name] = check_value(p, reader.get(_join(ns, p.name), default), ns)
-    return out
+def missing(name: str) -> ConfigError:
+    """The error for a parameter that is not set: ``<namespace>: <key>: missing``."""
+    ns, _, key = name.rstrip('/').rpartition('/')
+    return ConfigError(ns or '/', key, 'missing')
+
+
+def read_group(reader: ParamReader, ns: str, params: Sequence[Param]) -> Dict[str, Any]:
+    """Read each parameter of ``params`` under ``ns`` with one getParam, validated; every one is required."""
+    return {p.name: check_value(p, reader.get(_join(ns, p.name)), ns) for p in params}
 
 
 @dataclass
@@ -174,7 +179,7 @@ def read_costmap(reader: ParamReader, node_ns: str, name: str, warnings: List[st
             warnings.append(f'{ns}: parameter {old} is ignored because plugins are used (as costmap_2d)')
     plugins: List[Tuple[str, str]] = []
     if has_plugins:
-        raw = reader.get(_join(ns, 'plugins'), [])
+        raw = reader.get(_join(ns, 'plugins'))
         if not isinstance(raw, list):
             raise ConfigError(ns, 'plugins', f'expected a list of {{name, type}}, got {raw!r}')
         for i, entry in enumerate(raw):
@@ -201,7 +206,7 @@ def read_costmap(reader: ParamReader, node_ns: str, name: str, warnings: List[st
     for pname, kind in plugins:
         pns = _join(ns, pname)
         if kind == 'static':
-            s = read_group(reader, pns, STATIC_DIRECT, {'track_unknown_space': True})
+            s = read_group(reader, pns, STATIC_DIRECT)
             g = read_group(reader, pns, GENERIC_PLUGIN_CFG)
             map_topic, first_map_only = s['map_topic'], s['first_map_only']
             static_cfg = StaticLayerConfig(enabled=g['enabled'], track_unknown_space=s['track_unknown_space'],
@@ -209,17 +214,19 @@ def read_costmap(reader: ParamReader, node_ns: str, name: str, warnings: List[st
                                            unknown_cost_value=s['unknown_cost_value'],
                                            trinary_costmap=s['trinary_costmap'], use_maximum=s['use_maximum'])
         elif kind == 'obstacle':
-            o = read_group(reader, pns, OBSTACLE_DIRECT, {'track_unknown_space': direct['track_unknown_space']})
+            o = read_group(reader, pns, OBSTACLE_DIRECT)
             names = o['observation_sources'].split()
             for src in names:
                 sns = _join(pns, src)
-                sp = read_group(reader, sns, SOURCE_DIRECT, {'topic': src})
+                sp = read_group(reader, sns, SOURCE_DIRECT)
                 if sp['data_type'] != 'LaserScan':
                     raise ConfigError(sns, 'data_type', f"unsupported '{sp['data_type']}' (only LaserScan)")
                 ranges = {}
                 for p in SOURCE_SEARCHED:
                     found = reader.search(sns, p.name)
-                    ranges[p.name] = check_value(p, reader.get(found, p.default), sns) if found else p.default
+                    if not found:
+                        raise ConfigError(sns, p.name, 'missing (searched upwards from here)')
+                    ranges[p.name] = check_value(p, reader.get(found), sns)
                 sources.append(SourceParams(src, sp['topic'], sp['sensor_frame'], sp['expected_update_rate'],
                                             ObstacleLayerConfig(
                                                 track_unknown_space=o['track_unknown_space'],
@@ -245,18 +252,18 @@ def read_costmap(reader: ParamReader, node_ns: str, name: str, warnings: List[st
                                                  inflate_unknown=r['inflate_unknown'])
     # makeFootprintFromParams: footprint, else robot_radius, each searched upwards
     footprint: List[Tuple[float, float]] = []
-    radius = 0.46
     found = reader.search(ns, 'footprint')
     if found:
-        footprint = parse_footprint(reader.get(found, '[]'), ns)
+        footprint = parse_footprint(reader.get(found), ns)
     if not footprint:
         found = reader.search(ns, 'robot_radius')
-        if found:
-            radius = check_value(_ROBOT_RADIUS, reader.get(found, radius), ns)
+        if not found:
+            raise ConfigError(ns, 'robot_radius', 'missing (searched upwards from here; or set a footprint)')
+        radius = check_value(_ROBOT_RADIUS, reader.get(found), ns)
     else:
         radius = max(math.hypot(x, y) for x, y in footprint)
         warnings.append(f'{ns}: polygon footprint approximated by its circumscribed circle (r = {radius:.3f} m)')
-    r = read_group(reader, ns, COSTMAP_CFG, {'robot_radius': radius})
+    r = read_group(reader, ns, COSTMAP_CFG)
     cfg = CostmapConfig(global_frame=direct['global_frame'], robot_base_frame=direct['robot_base_frame'],
                         rolling_window=direct['rolling_window'], width=r['width'], height=r['height'],
                         resolution=r['resolution'], origin_x=r['origin_x'], origin_y=r['origin_y'],
@@ -273,7 +280,7 @@ def read_costmap(reader: ParamReader, node_ns: str, name: str, warnings: List[st
 def read_recoveries(reader: ParamReader, node_ns: str, cfg: MoveBaseConfig,
                     circumscribed_radius: float) -> List[RecoveryParams]:
     """move_base's ``loadRecoveryBehaviors`` (or the defaults) and each behaviour's initialize()."""
-    raw = reader.get(_join(node_ns, 'recovery_behaviors'), None)
+    raw = reader.get_optional(_join(node_ns, 'recovery_behaviors'))
     specs: List[RecoverySpec]
     if raw is None:
         specs = default_recovery_specs(cfg.clearing_rotation_allowed)
@@ -297,7 +304,7 @@ def read_recoveries(reader: ParamReader, node_ns: str, cfg: MoveBaseConfig,
             r = read_group(reader, rns, CLEAR_RECOVERY_DIRECT)
             if r['affected_maps'] not in ('global', 'local', 'both'):
                 raise ConfigError(rns, 'affected_maps', f"expected global, local or both, got '{r['affected_maps']}'")
-            layers = reader.get(_join(rns, 'layer_names'), ['obstacles'])
+            layers = reader.get(_join(rns, 'layer_names'))
             if not isinstance(layers, list) or not all(isinstance(v, str) for v in layers):
                 raise ConfigError(rns, 'layer_names', f'expected a list of layer names, got {layers!r}')
             out.append(RecoveryParams(spec.name, spec.type, clear=ClearCostmapConfig(
@@ -307,16 +314,14 @@ def read_recoveries(reader: ParamReader, node_ns: str, cfg: MoveBaseConfig,
             r = read_group(reader, rns, ROTATE_RECOVERY_DIRECT)
             blp = _join(node_ns, 'TrajectoryPlannerROS')
             values = {}
-            for current, old, default in ROTATE_BLP:
-                p = _d(current, default, '', 0)
-                if reader.has(_join(blp, current)):
-                    values[current] = check_value(p, reader.get(_join(blp, current), default), blp)
+            for p, old in ROTATE_BLP:
+                if reader.has(_join(blp, p.name)):
+                    values[p.name] = check_value(p, reader.get(_join(blp, p.name)), blp)
                 elif reader.has(_join(blp, old)):
-                    values[current] = check_value(p, reader.get(_join(blp, old), default), blp)
+                    values[p.name] = check_value(p, reader.get(_join(blp, old)), blp)
                 else:
-                    values[current] = default
-            tol = check_value(_d('yaw_goal_tolerance', 0.10, '', 0),
-                              reader.get(_join(blp, 'yaw_goal_tolerance'), 0.10), blp)
+                    raise ConfigError(blp, p.name, f'missing (or its old name {old})')
+            tol = check_value(ROTATE_BLP_TOLERANCE, reader.get(_join(blp, ROTATE_BLP_TOLERANCE.name)), blp)
             out.append(RecoveryParams(spec.name, spec.type, rotate=RotateConfig(
                 sim_granularity=r['sim_granularity'], frequency=r['frequency'], acc_lim_th=values['acc_lim_theta'],
                 max_rotational_vel=values['max_vel_theta'],
@@ -328,9 +333,9 @@ def dwa_config(values: Dict[str, Any], extra: Dict[str, Any]) -> DWAConfig:
     """A :class:`DWAConfig` from the DWAPlanner.cfg group plus the direct reads."""
     names = {f for f in DWAConfig.__dataclass_fields__}
     kwargs = {k: v for k, v in values.items() if k in names}
-    kwargs['latch_xy_goal_tolerance'] = extra.get('latch_xy_goal_tolerance', False)
-    kwargs['cheat_factor'] = extra.get('cheat_factor', 1.0)
-    kwargs['sum_scores'] = extra.get('sum_scores', False)
+    kwargs['latch_xy_goal_tolerance'] = extra['latch_xy_goal_tolerance']
+    kwargs['cheat_factor'] = extra['cheat_factor']
+    kwargs['sum_scores'] = extra['sum_scores']
     return DWAConfig(**kwargs)
 
 
@@ -361,8 +366,7 @@ def read_navigation_params(reader: ParamReader, node_ns: str) -> NavigationParam
         'planner_frequency', 'controller_frequency', 'planner_patience', 'controller_patience', 'max_planning_retries',
         'oscillation_timeout', 'oscillation_distance', 'make_plan_clear_costmap', 'make_plan_add_unreachable_goal')]))
     radii = read_group(reader, node_ns, MOVE_BASE_DIRECT[2:4])
-    clearing = read_group(reader, node_ns, MOVE_BASE_DIRECT[4:5],
-                          {'clearing_radius': radii['local_costmap/circumscribed_radius']})
+    clearing = read_group(reader, node_ns, MOVE_BASE_DIRECT[4:5])
     mb.update(read_group(reader, node_ns, [p for p in MOVE_BASE_CFG if p.name in (
         'conservative_reset_dist', 'shutdown_costmaps', 'clearing_rotation_allowed', 'recovery_behavior_enabled')]))
     if mb['controller_frequency'] <= 0:
@@ -378,7 +382,7 @@ def read_navigation_params(reader: ParamReader, node_ns: str) -> NavigationParam
 
     local_costmap = read_costmap(reader, node_ns, 'local_costmap', warnings)
     dwa_ns = _join(node_ns, 'DWAPlannerROS')
-    odom_topic = reader.get(_join(dwa_ns, 'odom_topic'), 'odom')
+    odom_topic = reader.get(_join(dwa_ns, 'odom_topic'))
     if not isinstance(odom_topic, str) or not odom_topic:
         raise ConfigError(dwa_ns, 'odom_topic', f'expected a topic name, got {odom_topic!r}')
     for new, old in DWA_RENAMED:
@@ -387,8 +391,7 @@ def read_navigation_params(reader: ParamReader, node_ns: str) -> NavigationParam
                             f'(the old name is ignored, as in DWAPlannerROS on Noetic)')
     found = reader.search(dwa_ns, 'controller_frequency')
     if found:
-        freq = reader.get(found, 20.0)
-        check_value(_d('controller_frequency', 20.0, '', 0), freq, dwa_ns)
+        check_value(CONTROLLER_FREQUENCY, reader.get(found), dwa_ns)
     extra = read_group(reader, dwa_ns, DWA_DIRECT)
     dwa_values = read_group(reader, dwa_ns, DWA_CFG)
     for lo, hi in (('min_vel_x', 'max_vel_x'), ('min_vel_trans', 'max_vel_trans'), ('min_vel_theta', 'max_vel_theta')):
