@@ -11,7 +11,7 @@ reproduced rather than replaced by one ``getParam('~')``. Every value is validat
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Dict, List, Optional, Protocol, Sequence, Tuple
 
 from cnr_params import ConfigError
@@ -216,35 +216,36 @@ def read_costmap(reader: ParamReader, node_ns: str, name: str, warnings: List[st
         elif kind == 'obstacle':
             o = read_group(reader, pns, OBSTACLE_DIRECT)
             names = o['observation_sources'].split()
+            read_sources = []
             for src in names:
                 sns = _join(pns, src)
                 sp = read_group(reader, sns, SOURCE_DIRECT)
                 if sp['data_type'] != 'LaserScan':
                     raise ConfigError(sns, 'data_type', f"unsupported '{sp['data_type']}' (only LaserScan)")
-                ranges = {}
                 for p in SOURCE_SEARCHED:
                     found = reader.search(sns, p.name)
                     if not found:
                         raise ConfigError(sns, p.name, 'missing (searched upwards from here)')
-                    ranges[p.name] = check_value(p, reader.get(found), sns)
+                    sp[p.name] = check_value(p, reader.get(found), sns)
+                read_sources.append((src, sp))
+            r = read_group(reader, pns, OBSTACLE_PLUGIN_CFG)
+            if not read_sources:
+                raise ConfigError(pns, 'observation_sources', 'no observation source (a LaserScan source is needed)')
+            for src, sp in read_sources:
                 sources.append(SourceParams(src, sp['topic'], sp['sensor_frame'], sp['expected_update_rate'],
                                             ObstacleLayerConfig(
+                                                enabled=r['enabled'],
+                                                footprint_clearing_enabled=r['footprint_clearing_enabled'],
+                                                combination_method=r['combination_method'],
                                                 track_unknown_space=o['track_unknown_space'],
-                                                obstacle_range=ranges['obstacle_range'],
-                                                raytrace_range=ranges['raytrace_range'],
+                                                obstacle_range=sp['obstacle_range'],
+                                                raytrace_range=sp['raytrace_range'],
                                                 min_obstacle_height=sp['min_obstacle_height'],
                                                 max_obstacle_height=sp['max_obstacle_height'],
                                                 inf_is_valid=sp['inf_is_valid'], marking=sp['marking'],
                                                 clearing=sp['clearing'])))
-            r = read_group(reader, pns, OBSTACLE_PLUGIN_CFG)
-            base = sources[0].layer if sources else ObstacleLayerConfig(track_unknown_space=o['track_unknown_space'])
-            obstacle_cfg = ObstacleLayerConfig(
-                enabled=r['enabled'], footprint_clearing_enabled=r['footprint_clearing_enabled'],
-                combination_method=r['combination_method'], track_unknown_space=base.track_unknown_space,
-                obstacle_range=base.obstacle_range, raytrace_range=base.raytrace_range,
-                min_obstacle_height=base.min_obstacle_height,
-                max_obstacle_height=min(base.max_obstacle_height, r['max_obstacle_height']),
-                inf_is_valid=base.inf_is_valid, marking=base.marking, clearing=base.clearing)
+            obstacle_cfg = replace(sources[0].layer, max_obstacle_height=min(sources[0].layer.max_obstacle_height,
+                                                                              r['max_obstacle_height']))
         else:
             r = read_group(reader, pns, INFLATION_PLUGIN_CFG)
             inflation_cfg = InflationLayerConfig(enabled=r['enabled'], inflation_radius=r['inflation_radius'],
