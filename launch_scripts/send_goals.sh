@@ -3,7 +3,7 @@
 #
 #   launch_scripts/send_goals.sh [--host H] [--port P] [--goals FILE.yaml | X Y YAW]
 #
-# FILE holds `goals: [{x: .., y: .., yaw: ..}, ...]` in the map frame (default config/goals_corridor.yaml).
+# FILE holds `goals: [{name: .., x: .., y: .., yaw: ..}, ...]` (all required) in the map frame (default config/goals_corridor.yaml).
 # Exits 0 when every goal succeeded, 1 otherwise.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
