@@ -199,18 +199,18 @@ RECONFIGURABLE: Dict[str, Tuple[List[Param], str]] = {
 MOVE_BASE_DIRECT: List[Param] = [
     _s('global_costmap/robot_base_frame', 'Robot frame used for goals and plans.'),
     _s('global_costmap/global_frame', 'Frame of goals and global plans.'),
-    _d('local_costmap/inscribed_radius', 'Read as move_base does; sets the default clearing_radius [m].', 0),
+    _d('local_costmap/inscribed_radius', 'Read as move_base does (move_base derives clearing_radius from it) [m].', 0),
     _d('local_costmap/circumscribed_radius', 'Read as move_base does; aggressive_reset clears beyond 4x this '
        '[m].', 0),
     _d('clearing_radius', 'Half side of the window cleared around the robot before a make_plan request [m] '
-       '(default: circumscribed_radius).', 0),
+       '(move_base: circumscribed_radius).', 0),
 ]
 
 COSTMAP_DIRECT: List[Param] = [
     _s('global_frame', 'Frame of the costmap.'),
     _s('robot_base_frame', 'Frame of the robot base.'),
     _b('rolling_window', 'The costmap is a window that follows the robot.'),
-    _b('track_unknown_space', 'Default for the layers\' track_unknown_space.'),
+    _b('track_unknown_space', 'Read as costmap_2d does (its layers\' default there); each layer here sets its own.'),
     _b('always_send_full_costmap', 'Publish the whole costmap on every publish cycle (else costmap_updates).'),
 ]
 
@@ -226,7 +226,7 @@ STATIC_DIRECT: List[Param] = [
 ]
 
 OBSTACLE_DIRECT: List[Param] = [
-    _b('track_unknown_space', 'Cells never observed are NO_INFORMATION (default: the costmap\'s).'),
+    _b('track_unknown_space', 'Cells never observed are NO_INFORMATION.'),
     _d('transform_tolerance', 'Accepted; scans are transformed at their own stamps [s].', 0),
     _s('observation_sources', 'Space-separated list of sources (each a sub-namespace).'),
 ]
@@ -241,8 +241,8 @@ SOURCE_DIRECT: List[Param] = [
     _b('inf_is_valid', 'Out-of-range readings clear along their whole beam.'),
     _b('clearing', 'The source clears free space by raytracing.'),
     _b('marking', 'The source marks obstacles.'),
-    _s('topic', 'Topic of the sensor_msgs/LaserScan (default: the source name).'),
-    _s('sensor_frame', 'Frame of the sensor (default: the scan\'s header frame).'),
+    _s('topic', 'Topic of the sensor_msgs/LaserScan.'),
+    _s('sensor_frame', 'Frame of the sensor (\'\': the scan\'s header frame).'),
 ]
 SOURCE_SEARCHED: List[Param] = [
     _d('obstacle_range', 'Maximum range at which hits are marked [m] (searched upwards).', 0),
