@@ -8,7 +8,7 @@
 #                               [--placements M-M,C-Ma,C-Mo,Multi] [--out DIR]
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
-case "${1:-}" in -h|--help) awk 'NR>1 && /^#/ {sub(/^# ?/, ""); print; next} NR>1 {exit}' "$0"; exit 0 ;; esac
+case "${1:-}" in -h|--help) cnr_help; exit 0 ;; esac
 [ "$(id -u)" = 0 ] || cnr_die "needs root (the testbed's network namespaces and TUN devices)"
 "$CNR_WS/launch_scripts/setup.sh" --no-install >/dev/null
 cnr_source_ws

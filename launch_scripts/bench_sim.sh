@@ -14,7 +14,7 @@ out="$CNR_WS/bench_results"
 while [ $# -gt 0 ]; do
   case "$1" in
     --out) out="$(realpath -m "${2:?}")"; shift 2 ;;
-    -h|--help) awk 'NR>1 && /^#/ {sub(/^# ?/, ""); print; next} NR>1 {exit}' "$0"; exit 0 ;;
+    -h|--help) cnr_help; exit 0 ;;
     *) cnr_die "unknown argument '$1' (see --help)" ;;
   esac
 done

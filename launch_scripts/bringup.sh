@@ -4,13 +4,14 @@
 #   launch_scripts/bringup.sh [--map corridor|datacenter|FILE.yaml] [--host H] [--port P]
 #                             [--rtf FACTOR] [--pose X Y YAW] [--obstacles] [--no-nav]
 #                             [--controller-frequency HZ] [-- extra roslaunch args]
+#   --controller-frequency: move_base's control rate (default: config/navigation/move_base.yaml).
 #
 # Starts a master first if none answers at the address (arguments, else ROS_MASTER_URI, else
 # localhost:11311). Runs in the foreground; Ctrl-C stops everything it started.
 #   --rtf 1.0 real time (default), 5 = five times faster, 0 = as fast as possible.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
-host=""; port=""; map="corridor"; rtf="1.0"; nav="true"; obstacles="false"; rate="5.0"
+host=""; port=""; map="corridor"; rtf="1.0"; nav="true"; obstacles="false"; rate=""
 x="0.5"; y="0.0"; yaw="0.0"; pose_given=0; extra=()
 while [ $# -gt 0 ]; do
   case "$1" in
@@ -23,7 +24,7 @@ while [ $# -gt 0 ]; do
     --no-nav) nav="false"; shift ;;
     --controller-frequency) rate="${2:?}"; shift 2 ;;
     --) shift; extra=("$@"); break ;;
-    -h|--help) awk 'NR>1 && /^#/ {sub(/^# ?/, ""); print; next} NR>1 {exit}' "$0"; exit 0 ;;
+    -h|--help) cnr_help; exit 0 ;;
     *) cnr_die "unknown argument '$1' (see --help)" ;;
   esac
 done
@@ -33,7 +34,7 @@ case "$map" in
 esac
 [ -f "$map_file" ] || cnr_die "map file not found: $map_file"
 if [ "$pose_given" = 0 ] && [ "$map" = datacenter ]; then x="1.0"; y="1.0"; yaw="0.0"; fi
-for v in "$rtf" "$x" "$y" "$yaw" "$rate"; do
+for v in "$rtf" "$x" "$y" "$yaw" ${rate:+"$rate"}; do
   [[ "$v" =~ ^-?[0-9]+(\.[0-9]+)?$ ]] || cnr_die "not a number: '$v'"
 done
 cnr_source_ws
@@ -42,5 +43,5 @@ cnr_ensure_master
 cnr_log "bringing up the TurtleBot on $ROS_MASTER_URI (map $map_file, real-time factor $rtf)"
 cnr_spawn roslaunch --wait cnr_bringup robot.launch map:="$map_file" real_time_factor:="$rtf" \
   x:="$x" y:="$y" a:="$yaw" obstacles:="$obstacles" navigation:="$nav" \
-  controller_frequency:="$rate" "${extra[@]}"
+  ${rate:+controller_frequency:="$rate"} "${extra[@]}"
 wait "${CNR_PIDS[-1]}"

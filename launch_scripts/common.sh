@@ -1,11 +1,15 @@
-# common.sh — sourced by the launch_scripts: workspace environment, master address, process cleanup.
-# Not executable on its own.
+# common.sh — sourced by every launch_script: --help text, workspace environment, master address,
+# process start and cleanup. Not executable on its own. Sourcing it only defines variables and functions;
+# the INT/TERM/EXIT traps that stop started processes are installed by the first cnr_spawn.
 #
 # Master address, in order of precedence: --host/--port arguments (parsed by each script),
 # then ROS_MASTER_URI from the environment, then http://localhost:11311.
 
 CNR_WS="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 CNR_PIDS=()
+
+# Print the script's header comment (from line 2 to the first line that is not a comment) as its help.
+cnr_help() { awk 'NR>1 && /^#/ {sub(/^# ?/, ""); print; next} NR>1 {exit}' "$0"; }
 
 cnr_die() { echo "$(basename "$0"): $*" >&2; exit 2; }
 cnr_log() { echo "[$(basename "$0")] $*"; }
@@ -38,8 +42,12 @@ sys.exit(0 if xmlrpc.client.ServerProxy(sys.argv[1]).getPid('/cnr_script')[0] ==
 PY
 }
 
-# Start a process in its own process group and remember it for cleanup.
+# Start a process in its own process group and remember it for cleanup (installs the cleanup traps).
 cnr_spawn() {
+  if [ "${#CNR_PIDS[@]}" -eq 0 ]; then
+    trap 'cnr_cleanup; exit 130' INT TERM
+    trap 'cnr_cleanup' EXIT
+  fi
   setsid "$@" &
   CNR_PIDS+=("$!")
 }
@@ -76,5 +84,3 @@ cnr_cleanup() {
     done
   done
 }
-trap 'cnr_cleanup; exit 130' INT TERM
-trap 'cnr_cleanup' EXIT

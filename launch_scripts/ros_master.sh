@@ -12,7 +12,7 @@ while [ $# -gt 0 ]; do
   case "$1" in
     --host) host="${2:?--host needs a value}"; shift 2 ;;
     --port) port="${2:?--port needs a value}"; shift 2 ;;
-    -h|--help) awk 'NR>1 && /^#/ {sub(/^# ?/, ""); print; next} NR>1 {exit}' "$0"; exit 0 ;;
+    -h|--help) cnr_help; exit 0 ;;
     *) cnr_die "unknown argument '$1' (see --help)" ;;
   esac
 done

@@ -19,7 +19,7 @@ while [ $# -gt 0 ]; do
     --port) port="${2:?}"; shift 2 ;;
     --rtf) rtf="${2:?}"; shift 2 ;;
     --report-dir) report="$(realpath -m "${2:?}")"; shift 2 ;;
-    -h|--help) awk 'NR>1 && /^#/ {sub(/^# ?/, ""); print; next} NR>1 {exit}' "$0"; exit 0 ;;
+    -h|--help) cnr_help; exit 0 ;;
     *) cnr_die "unknown argument '$1' (see --help)" ;;
   esac
 done

@@ -5,8 +5,9 @@
 #
 # Integration tests start their own rosmaster on a free port (never 11311) and stop everything they start.
 set -euo pipefail
-WS="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
-case "${1:-}" in -h|--help) awk 'NR>1 && /^#/ {sub(/^# ?/, ""); print; next} NR>1 {exit}' "$0"; exit 0 ;; esac
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+WS="$CNR_WS"
+case "${1:-}" in -h|--help) cnr_help; exit 0 ;; esac
 "$WS/launch_scripts/setup.sh"
 set +u; source "$WS/devel/setup.bash"; set -u
 cd "$WS"

@@ -3,7 +3,7 @@
 #
 #   launch_scripts/send_goals.sh [--host H] [--port P] [--goals FILE.yaml | X Y YAW]
 #
-# FILE holds `goals: [{x: .., y: .., yaw: ..}, ...]` in the map frame (default config/goals_corridor.yaml).
+# FILE holds `goals: [{name: .., x: .., y: .., yaw: ..}, ...]` (all required) in the map frame (default config/goals_corridor.yaml).
 # Exits 0 when every goal succeeded, 1 otherwise.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
@@ -13,7 +13,7 @@ while [ $# -gt 0 ]; do
     --host) host="${2:?}"; shift 2 ;;
     --port) port="${2:?}"; shift 2 ;;
     --goals) goals="$(realpath -m "${2:?}")"; shift 2 ;;
-    -h|--help) awk 'NR>1 && /^#/ {sub(/^# ?/, ""); print; next} NR>1 {exit}' "$0"; exit 0 ;;
+    -h|--help) cnr_help; exit 0 ;;
     *) [ $# -ge 3 ] || cnr_die "expected X Y YAW or --goals FILE (see --help)"; single=("$1" "$2" "$3"); shift 3 ;;
   esac
 done

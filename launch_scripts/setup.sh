@@ -7,13 +7,14 @@
 # 2. builds the workspace with catkin_make and Debian's /usr/bin/python3;
 # Afterwards: `source devel/setup.bash`. The README's two commands call this first.
 set -euo pipefail
-WS="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+WS="$CNR_WS"
 install=1; build=1
 for arg in "$@"; do
   case "$arg" in
     --no-install) install=0 ;;
     --no-build) build=0 ;;
-    -h|--help) awk 'NR>1 && /^#/ {sub(/^# ?/, ""); print; next} NR>1 {exit}' "$0"; exit 0 ;;
+    -h|--help) cnr_help; exit 0 ;;
     *) echo "setup.sh: unknown option '$arg' (see --help)" >&2; exit 2 ;;
   esac
 done

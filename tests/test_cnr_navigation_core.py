@@ -1,17 +1,30 @@
 """Navigation cores without a master: inflation costs, planning on small grids, the DWA controller."""
 import math
+import os
+from dataclasses import replace
 
 import numpy as np
 import pytest
 
-from cnr_navigation.core.costmap import (INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, CostmapConfig,
-                                         GridGeometry, InflationLayerConfig, LayeredCostmap, ObstacleLayerConfig,
+from cnr_navigation.core.costmap import (INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, GridGeometry, LayeredCostmap,
                                          inflate, inflation_cost_of_distance, scan_to_observation)
-from cnr_navigation.core.dwa import DWAConfig, DWAController
+from cnr_navigation.core.dwa import DWAController
 from cnr_navigation.core.geometry import Pose2D
-from cnr_navigation.core.planner import GlobalPlanner, PlannerConfig, PlanningError, PlanningGrid
+from cnr_navigation.core.param_files import read_config
+from cnr_navigation.core.planner import GlobalPlanner, PlanningError, PlanningGrid
 
 RES = 0.05
+#: the TurtleBot navigation configuration (config/navigation), as the move_base node reads it
+NAV = read_config(os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'config'))
+LOCAL = NAV.local_costmap.config
+
+
+def inflation(**values):
+    return replace(LOCAL.inflation_layer, **values)
+
+
+def turtlebot_planner():
+    return GlobalPlanner(replace(NAV.planner, allow_unknown=True))
 
 
 def test_inflation_cost_formula():
@@ -28,7 +41,7 @@ def test_inflation_cost_formula():
 def test_inflate_grid_around_a_lethal_cell():
     grid = np.zeros((41, 41), dtype=np.uint8)
     grid[20, 20] = LETHAL_OBSTACLE
-    out = inflate(grid, RES, 0.2, InflationLayerConfig(inflation_radius=0.5, cost_scaling_factor=5.0))
+    out = inflate(grid, RES, 0.2, inflation(inflation_radius=0.5, cost_scaling_factor=5.0))
     assert out[20, 20] == LETHAL_OBSTACLE
     assert out[20, 24] == INSCRIBED_INFLATED_OBSTACLE     # 0.20 m away
     assert out[20, 26] == math.floor(252 * math.exp(-5.0 * (0.3 - 0.2)))
@@ -42,7 +55,7 @@ def planning_grid(costs):
 
 
 def test_plan_straight_line_on_free_grid():
-    plan = GlobalPlanner(PlannerConfig()).make_plan(planning_grid(np.zeros((20, 60), np.uint8)),
+    plan = turtlebot_planner().make_plan(planning_grid(np.zeros((20, 60), np.uint8)),
                                                     Pose2D(0.1, 0.5, 0.0), Pose2D(2.8, 0.5, 0.0))
     assert plan[0, :2] == pytest.approx([0.1, 0.5]) and plan[-1, :2] == pytest.approx([2.8, 0.5])
     assert np.all(np.abs(plan[:, 1] - 0.5) < RES)
@@ -53,8 +66,8 @@ def test_plan_straight_line_on_free_grid():
 def test_plan_goes_around_a_wall():
     costs = np.zeros((60, 60), np.uint8)
     costs[0:45, 30] = LETHAL_OBSTACLE                      # wall with a gap at the top
-    costs = inflate(costs, RES, 0.1, InflationLayerConfig(inflation_radius=0.3, cost_scaling_factor=5.0))
-    plan = GlobalPlanner(PlannerConfig()).make_plan(planning_grid(costs), Pose2D(0.5, 0.5, 0), Pose2D(2.5, 0.5, 0))
+    costs = inflate(costs, RES, 0.1, inflation(inflation_radius=0.3, cost_scaling_factor=5.0))
+    plan = turtlebot_planner().make_plan(planning_grid(costs), Pose2D(0.5, 0.5, 0), Pose2D(2.5, 0.5, 0))
     rows = (plan[:, 1] / RES).astype(int).clip(0, 59)
     cols = (plan[:, 0] / RES).astype(int).clip(0, 59)
     assert np.all(costs[rows, cols] < INSCRIBED_INFLATED_OBSTACLE)
@@ -64,7 +77,7 @@ def test_plan_goes_around_a_wall():
 def test_no_path_and_goal_in_obstacle_raise():
     costs = np.zeros((20, 60), np.uint8)
     costs[:, 30] = LETHAL_OBSTACLE                         # closed wall
-    planner = GlobalPlanner(PlannerConfig())
+    planner = turtlebot_planner()
     with pytest.raises(PlanningError):
         planner.make_plan(planning_grid(costs), Pose2D(0.5, 0.5, 0), Pose2D(2.5, 0.5, 0))
     with pytest.raises(PlanningError) as err:
@@ -76,16 +89,17 @@ def test_no_path_and_goal_in_obstacle_raise():
 
 
 def local_costmap():
-    cfg = CostmapConfig(global_frame='odom', rolling_window=True, width=4.0, height=4.0, robot_radius=0.2,
-                        static_layer=None, obstacle_layer=ObstacleLayerConfig(),
-                        inflation_layer=InflationLayerConfig(inflation_radius=0.5, cost_scaling_factor=5.0))
+    layer = replace(LOCAL.obstacle_layer, track_unknown_space=False, min_obstacle_height=0.0, max_obstacle_height=2.0)
+    cfg = replace(LOCAL, global_frame='odom', rolling_window=True, width=4.0, height=4.0, robot_radius=0.2,
+                  static_layer=None, obstacle_layer=layer,
+                  inflation_layer=inflation(inflation_radius=0.5, cost_scaling_factor=5.0))
     return LayeredCostmap(cfg, 'local_costmap')
 
 
 def test_dwa_drives_toward_the_plan_and_respects_limits():
     cm = local_costmap()
     cm.update(Pose2D(0, 0, 0), [], stamp=0.0)
-    dwa = DWAController(DWAConfig(max_vel_x=0.5, max_vel_trans=0.5, max_vel_y=0.0, min_vel_y=0.0, vy_samples=1,
+    dwa = DWAController(replace(NAV.dwa, max_vel_x=0.5, max_vel_trans=0.5, max_vel_y=0.0, min_vel_y=0.0, vy_samples=1,
                                   acc_lim_x=1.0, acc_lim_theta=2.0, sim_time=1.0, vx_samples=6), 5.0)
     plan = np.stack([np.linspace(0, 3, 61), np.zeros(61), np.zeros(61)], axis=1)
     assert dwa.set_plan(plan)
@@ -104,7 +118,7 @@ def test_dwa_avoids_an_obstacle_seen_by_the_laser():
     ranges[np.abs(angles) < 0.15] = 0.8                   # a person 0.8 m straight ahead
     obs = scan_to_observation(ranges, -fov / 2, fov / 639, 0.45, 5.0, Pose2D(0, 0, 0), 0.3, layer)
     cm.update(Pose2D(0, 0, 0), [obs], stamp=0.0)
-    dwa = DWAController(DWAConfig(max_vel_x=0.5, max_vel_trans=0.5, max_vel_y=0.0, min_vel_y=0.0, vy_samples=1,
+    dwa = DWAController(replace(NAV.dwa, max_vel_x=0.5, max_vel_trans=0.5, max_vel_y=0.0, min_vel_y=0.0, vy_samples=1,
                                   sim_time=1.7, vx_samples=6, occdist_scale=0.5), 5.0)
     plan = np.stack([np.linspace(0, 3, 61), np.zeros(61), np.zeros(61)], axis=1)
     dwa.set_plan(plan)
@@ -116,3 +130,32 @@ def test_dwa_avoids_an_obstacle_seen_by_the_laser():
         assert np.all(costs < INSCRIBED_INFLATED_OBSTACLE)
     else:
         assert res.mode in ('failed', 'stop')
+
+
+def test_readme_parameter_tables_are_the_generated_ones(workspace):
+    from cnr_navigation.core.param_docs import markdown_tables
+    with open(f'{workspace}/src/cnr_navigation/README.md') as f:
+        assert markdown_tables(f'{workspace}/config').strip() in f.read(), \
+            'regenerate: python3 -m cnr_navigation.core.param_docs config'
+
+
+def test_navigation_parameters_come_from_config_and_a_missing_one_is_named(workspace):
+    from cnr_params import ConfigError
+    from cnr_navigation.core.param_files import TreeReader, navigation_tree
+    from cnr_navigation.core.param_reader import read_navigation_params
+    tree = navigation_tree(f'{workspace}/config')
+    params = read_navigation_params(TreeReader(dict(tree)), '/move_base')
+    assert params.move_base.controller_frequency == 5.0 and params.dwa.sim_time == 1.0
+    assert params.local_costmap.config.width == 4.0 and params.clearing_radius == 0.46
+    assert params.global_costmap.map_topic == 'map' and params.local_costmap.sources[0].topic == 'scan'
+    for name, message in (('/move_base/DWAPlannerROS/sim_time', '/move_base/DWAPlannerROS: sim_time: missing'),
+                          ('/move_base/global_costmap/static_layer/map_topic',
+                           '/move_base/global_costmap/static_layer: map_topic: missing'),
+                          ('/move_base/TrajectoryPlannerROS/acc_lim_theta',
+                           '/move_base/TrajectoryPlannerROS: acc_lim_theta: missing'),
+                          ('/move_base/global_costmap/obstacle_layer/obstacle_range',
+                           'obstacle_range: missing \\(searched upwards')):
+        broken = {k: v for k, v in tree.items() if k != name}
+        assert len(broken) == len(tree) - 1
+        with pytest.raises(ConfigError, match=message):
+            read_navigation_params(TreeReader(broken), '/move_base')

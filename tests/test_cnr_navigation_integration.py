@@ -4,7 +4,7 @@ import threading
 
 import pytest
 
-from rosharness import wait_for
+from cnr_harness import wait_until
 
 rospy = pytest.importorskip('rospy')
 
@@ -19,7 +19,7 @@ def robot(ros):
     def ready():
         assert proc.alive(), proc.output()[-3000:]
         return not rospy.Time.now().is_zero() and client.wait_for_server(rospy.Duration(0.5))
-    wait_for(ready, 120, 'the move_base action server')
+    wait_until(ready, 120, 'the move_base action server')
     yield client
     proc.stop()
 
@@ -36,7 +36,7 @@ def goal_msg(x, y, yaw=0.0, frame='map'):
 
 def run_goal(client, goal, wall_timeout=240):
     client.send_goal(goal)
-    wait_for(lambda: client.wait_for_result(rospy.Duration(0.2)), wall_timeout, 'the goal result')
+    wait_until(lambda: client.wait_for_result(rospy.Duration(0.2)), wall_timeout, 'the goal result')
     return client.get_state(), client.get_goal_status_text()
 
 

@@ -1,20 +1,25 @@
 """Simulator cores without a master: ray casting, kinematics and limits, collisions, battery."""
+import dataclasses
 import math
+import os
 
 import numpy as np
 import pytest
 
 from cnr_params import ConfigError, Section
 from cnr_sim.core.battery import BatteryConfig, BatteryModel, CpuMeter
-from cnr_maps.pose import Pose2D
-from cnr_sim.core.kinematics import BaseLimits, DiffDrive, integrate
-from cnr_sim.core.laser import FakeLaser, LaserConfig
 from cnr_maps.mapio import OccupancyMap
+from cnr_maps.pose import Pose2D
+from cnr_sim.core.kinematics import DiffDrive, integrate
+from cnr_sim.core.laser import FakeLaser
 from cnr_sim.core.obstacles import MovingObstacle, obstacles_from_config
 from cnr_sim.core.raycast import cast_rays, circle_hits
-from cnr_sim.core.world import World, WorldConfig
+from cnr_sim.core.world import World
+from cnr_sim.params import config_section, read_laser, read_limits, read_world
 
 RES = 0.05
+#: the simulator's private namespace as simulator.launch loads it from config/
+SIM = config_section(os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'config'))
 
 
 def box_map(size=200, wall_col=150):
@@ -53,7 +58,7 @@ def test_circle_hits_analytic():
 
 def test_fake_laser_conventions():
     m = box_map()
-    cfg = LaserConfig(offset_x=0.0, offset_y=0.0, max_range=5.0)
+    cfg = dataclasses.replace(read_laser(SIM), offset_x=0.0, offset_y=0.0, max_range=5.0)
     laser = FakeLaser(cfg, m.data >= 50, RES, (0, 0))
     assert cfg.beams == 640 and cfg.angle_increment == pytest.approx(math.radians(58) / 639)
     ranges = laser.scan(5.0, 5.0, 0.0)                      # wall 2.5 m ahead
@@ -69,7 +74,7 @@ def test_fake_laser_conventions():
 
 
 def test_velocity_limits_acceleration_and_watchdog():
-    base = DiffDrive(BaseLimits())
+    base = DiffDrive(read_limits(SIM))
     base.command(5.0, -10.0, now=0.0)
     assert base.cmd_v == 0.70 and base.cmd_w == pytest.approx(-math.pi)
     v, w = base.update(0.0, 0.02)
@@ -94,7 +99,7 @@ def test_integrate_exact_arc():
 
 
 def make_world(**kw):
-    return World(box_map(), BaseLimits(), LaserConfig(), WorldConfig(), Pose2D(5.0, 5.0, 0.0), **kw)
+    return World(box_map(), read_limits(SIM), read_laser(SIM), read_world(SIM), Pose2D(5.0, 5.0, 0.0), **kw)
 
 
 def test_collision_stalls_and_reports_once():
@@ -115,7 +120,8 @@ def test_collision_stalls_and_reports_once():
 
 
 def test_moving_obstacle_blocks_robot():
-    person = MovingObstacle('person', np.array([[6.0, 5.0], [6.0, 5.0001]]), speed=0.1, radius=0.25)
+    person = MovingObstacle('person', np.array([[6.0, 5.0], [6.0, 5.0001]]), speed=0.1, radius=0.25, loop=False,
+                            start_delay=0.0)
     w = make_world(obstacles=[person])
     hit = None
     for _ in range(300):
@@ -146,7 +152,7 @@ def test_perfect_localization_map_to_odom():
 
 
 def test_battery_reacts_to_motion_cpu_and_radio():
-    cfg = BatteryConfig()
+    cfg = BatteryConfig.from_section(SIM.section('battery'))
     idle, moving, working = BatteryModel(cfg), BatteryModel(cfg), BatteryModel(cfg)
     for _ in range(500):
         idle.step(0.02, 0.0, 0.0, 0.0, 0.0)
@@ -167,6 +173,23 @@ def test_battery_config_from_repository_file(workspace):
     assert cfg.capacity_ah == 2.2 and cfg.nominal_voltage == 14.8
     with pytest.raises(ConfigError):
         BatteryConfig.from_section(Section({'capacity_ah': -1.0}, 'battery.yaml'))
+    del sec.data['mass']
+    with pytest.raises(ConfigError, match='mass: missing'):
+        BatteryConfig.from_section(sec)
+
+
+def test_simulator_parameters_have_no_defaults_in_code():
+    """Every simulator parameter comes from config/ (or the launch file); a missing one is named."""
+    from cnr_sim.params import read_params
+    launch = dict(map_file='corridor.yaml', real_time_factor=1.0, initial_pose=[0.5, 0.0, 0.0])
+    data = dict(SIM.data, **launch)
+    assert read_params(Section(data, '/simulator')).limits.max_linear == 0.70     # config/robot.yaml
+    for key in ('map_frame', 'seed', 'real_time_factor', 'enable_obstacles'):
+        with pytest.raises(ConfigError, match=f'/simulator: {key}: missing'):
+            read_params(Section({k: v for k, v in data.items() if k != key}, '/simulator'))
+    base = {k: v for k, v in data['base'].items() if k != 'max_linear'}
+    with pytest.raises(ConfigError, match='base.max_linear: missing'):
+        read_params(Section(dict(data, base=base), '/simulator'))
 
 
 def test_cpu_meter_measures_this_process():
@@ -184,6 +207,10 @@ def test_obstacles_config_errors():
     with pytest.raises(ConfigError) as err:
         obstacles_from_config(Section({'obstacles': [{'waypoints': [[0, 0]], 'speed': 1, 'radius': 0.2}]}, 'o.yaml'))
     assert 'waypoints' in str(err.value)
-    with pytest.raises(ConfigError):
-        obstacles_from_config(Section({'obstacles': [{'waypoints': [[0, 0], [1, 1]], 'speed': 0, 'radius': 0.2}]},
-                                      'o.yaml'))
+    good = {'name': 'p', 'waypoints': [[0, 0], [1, 1]], 'speed': 1, 'radius': 0.2, 'loop': False, 'start_delay': 0}
+    assert len(obstacles_from_config(Section({'obstacles': [good]}, 'o.yaml'))) == 1
+    with pytest.raises(ConfigError, match='speed'):
+        obstacles_from_config(Section({'obstacles': [dict(good, speed=0)]}, 'o.yaml'))
+    for key in ('name', 'loop', 'start_delay'):
+        with pytest.raises(ConfigError, match=f'{key}: missing'):
+            obstacles_from_config(Section({'obstacles': [{k: v for k, v in good.items() if k != key}]}, 'o.yaml'))

@@ -1,11 +1,12 @@
 """The simulator with a real rosmaster: rates, tf, watchdog, collisions, services, bad input."""
 import math
+import os
 import subprocess
 import threading
 
 import pytest
 
-from rosharness import wait_for
+from cnr_harness import wait_until
 
 rospy = pytest.importorskip('rospy')
 
@@ -36,7 +37,7 @@ def sim(ros, workspace):
     from nav_msgs.msg import Odometry
     proc = ros.master.roslaunch('cnr_sim', 'simulator.launch', 'real_time_factor:=2.0', 'x:=0.5', 'y:=0.0')
     gt = Recorder('base_pose_ground_truth', Odometry)
-    wait_for(lambda: gt.last() is not None or not proc.alive(), 90, 'ground truth from the simulator')
+    wait_until(lambda: gt.last() is not None or not proc.alive(), 90, 'ground truth from the simulator')
     assert proc.alive(), proc.output()[-2000:]
     yield proc
     gt.sub.unregister()
@@ -59,7 +60,7 @@ def test_scan_and_odom_rates_in_sim_time(sim):
     from sensor_msgs.msg import LaserScan
     scans, odoms = Recorder('scan', LaserScan), Recorder('odom', Odometry)
     t0 = sim_now()
-    wait_for(lambda: sim_now() > t0 + 4.0, 60, '4 s of sim time')
+    wait_until(lambda: sim_now() > t0 + 4.0, 60, '4 s of sim time')
     s, o = scans.since(t0 + 1.0), odoms.since(t0 + 1.0)
     scans.sub.unregister(), odoms.sub.unregister()
     span = lambda m: m[-1].header.stamp.to_sec() - m[0].header.stamp.to_sec()
@@ -82,7 +83,7 @@ def test_tf_chain(sim):
             return buf.lookup_transform('map', 'camera_depth_frame', rospy.Time(0))
         except tf2_ros.TransformException:
             return None
-    t = wait_for(lookup, 30, 'tf map -> camera_depth_frame')
+    t = wait_until(lookup, 30, 'tf map -> camera_depth_frame')
     listener.unregister()
     assert t.transform.translation.z == pytest.approx(0.287, abs=1e-6)
     for parent, child in (('map', 'odom'), ('odom', 'base_footprint'), ('base_footprint', 'base_link')):
@@ -102,7 +103,7 @@ def test_base_stops_when_commands_stop_and_nan_is_ignored(sim):
     from nav_msgs.msg import Odometry
     assert teleport(0.5, 0.0, 0.0).success
     pub = rospy.Publisher('mobile_base/commands/velocity', Twist, queue_size=1)
-    wait_for(lambda: pub.get_num_connections() > 0, 30, 'simulator subscribed to velocity')
+    wait_until(lambda: pub.get_num_connections() > 0, 30, 'simulator subscribed to velocity')
     nan = Twist()
     nan.linear.x = float('nan')
     pub.publish(nan)
@@ -115,7 +116,7 @@ def test_base_stops_when_commands_stop_and_nan_is_ignored(sim):
         rospy.sleep(0.1)
     last_cmd = sim_now()
     assert gt.last().twist.twist.linear.x == pytest.approx(0.3, abs=0.01)
-    wait_for(lambda: sim_now() > last_cmd + 2.0, 30, '2 s of sim time without commands')
+    wait_until(lambda: sim_now() > last_cmd + 2.0, 30, '2 s of sim time without commands')
     stopped = [m for m in gt.since(last_cmd) if m.twist.twist.linear.x == 0.0]
     gt.sub.unregister()
     pub.unregister()
@@ -132,14 +133,14 @@ def test_collision_stops_the_robot(sim):
     events = Recorder('mobile_base/events/collision', Collision)
     gt = Recorder('base_pose_ground_truth', Odometry)
     pub = rospy.Publisher('mobile_base/commands/velocity', Twist, queue_size=1)
-    wait_for(lambda: pub.get_num_connections() > 0, 30, 'simulator subscribed to velocity')
+    wait_until(lambda: pub.get_num_connections() > 0, 30, 'simulator subscribed to velocity')
     cmd = Twist()
     cmd.linear.x = 0.5
     t_end = sim_now() + 5.0
     while sim_now() < t_end and not events.msgs:
         pub.publish(cmd)
         rospy.sleep(0.1)
-    wait_for(lambda: events.msgs, 10, 'a collision event')
+    wait_until(lambda: events.msgs, 10, 'a collision event')
     for _ in range(10):
         pub.publish(cmd)
         rospy.sleep(0.1)
@@ -156,12 +157,34 @@ def test_teleport_rejects_outside_map(sim):
     assert teleport(0.5, 0.0, 0.0).success
 
 
-def test_bad_map_file_exits_2_with_one_line(ros, tmp_path):
+def run_simulator(ros, workspace, name, **values):
+    """``rosrun cnr_sim simulator`` with config/ loaded as simulator.launch loads it, changed by ``values``."""
+    from cnr_sim.params import config_section
+    data = config_section(os.path.join(workspace, 'config'), real_time_factor=1.0, initial_pose=[0.5, 0.0, 0.0],
+                          **values).data
+    for key in [k for k, v in values.items() if v is None]:
+        del data[key]
+    ros.master.call('setParam', f'/{name}', data)
+    try:
+        return subprocess.run(['rosrun', 'cnr_sim', 'simulator', f'__name:={name}'], env=ros.master.env,
+                              capture_output=True, text=True, timeout=60)
+    finally:
+        ros.master.call('deleteParam', f'/{name}')
+
+
+def test_bad_map_file_exits_2_with_one_line(ros, tmp_path, workspace):
     bad = tmp_path / 'bad.yaml'
     bad.write_text('image: none.pgm\nresolution: -1\norigin: [0, 0, 0]\nnegate: 0\n'
                    'occupied_thresh: 0.65\nfree_thresh: 0.196\n')
-    r = subprocess.run(['rosrun', 'cnr_sim', 'simulator', '__name:=bad_sim', f'_map_file:={bad}'],
-                       env=ros.master.env, capture_output=True, text=True, timeout=60)
+    r = run_simulator(ros, workspace, 'bad_sim', map_file=str(bad))
     assert r.returncode == 2
     lines = [l for l in r.stderr.splitlines() if l.strip()]
     assert len(lines) == 1 and 'bad.yaml' in lines[0] and 'resolution' in lines[0], r.stderr
+
+
+def test_missing_parameter_exits_2_naming_it(ros, workspace):
+    r = run_simulator(ros, workspace, 'incomplete_sim', map_file=os.path.join(workspace, 'maps', 'corridor.yaml'),
+                      seed=None)
+    assert r.returncode == 2
+    lines = [l for l in r.stderr.splitlines() if l.strip()]
+    assert len(lines) == 1 and '/incomplete_sim: seed: missing' in lines[0], r.stderr

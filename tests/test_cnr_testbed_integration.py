@@ -7,7 +7,7 @@ import time
 
 import pytest
 
-from rosharness import wait_for
+from cnr_harness import wait_until
 
 pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason='needs root (network namespaces and TUN devices)')
 
@@ -61,7 +61,7 @@ def test_down_leaves_nothing_and_sigkill_is_cleaned_up(workspace):
     sup = int(open(f'/run/cnr_testbed/{NAME}.pid').read())
     child = int(subprocess.run(['pgrep', '-P', str(sup)], capture_output=True, text=True).stdout.split()[0])
     os.kill(child, signal.SIGKILL)                 # a crash of the emulator
-    wait_for(lambda: not leftovers(), 15, 'the supervisor to remove namespaces after a crash')
+    wait_until(lambda: not leftovers(), 15, 'the supervisor to remove namespaces after a crash')
     assert script(workspace, 'up').returncode == 0
     assert script(workspace, 'down').returncode == 0
     assert not leftovers()

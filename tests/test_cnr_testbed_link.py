@@ -1,11 +1,23 @@
 """Link emulator scheduling and testbed configuration parsing (no root, no network)."""
+import copy
+import os
 import random
 
 import pytest
+import yaml
 
-from cnr_params import ConfigError
+from cnr_params import ConfigError, load_yaml
 from cnr_testbed.core.config import load_link_map, load_testbed, load_trace
 from cnr_testbed.core.link import Conditions, LinkDirection
+
+TESTBED_YAML = os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'config', 'testbed.yaml')
+#: an unimpaired link as config/testbed.yaml sets it
+IDEAL = load_yaml(TESTBED_YAML)['testbed']['link']['both']
+
+
+def cond(**changes):
+    """Conditions: the configured unimpaired link with ``changes``."""
+    return Conditions(**dict(IDEAL, **changes))
 
 
 def run(link, times, size=1000):
@@ -14,19 +26,19 @@ def run(link, times, size=1000):
 
 
 def test_fixed_delay():
-    link = LinkDirection(Conditions(delay=50.0))
+    link = LinkDirection(cond(delay=50.0))
     link.offer(b'x' * 100, 1.0)
     assert link.next_due() == pytest.approx(1.05)
     assert link.due(1.049) == [] and len(link.due(1.05)) == 1
 
 
 def test_jitter_keeps_order_unless_reorder():
-    link = LinkDirection(Conditions(delay=20.0, jitter=10.0), random.Random(1))
+    link = LinkDirection(cond(delay=20.0, jitter=10.0), random.Random(1))
     for i in range(200):
         link.offer(i.to_bytes(2, 'big'), i * 0.001)
     out = [int.from_bytes(p, 'big') for p in link.due(10.0)]
     assert out == list(range(200))
-    link = LinkDirection(Conditions(delay=20.0, jitter=10.0, reorder=True), random.Random(1))
+    link = LinkDirection(cond(delay=20.0, jitter=10.0, reorder=True), random.Random(1))
     for i in range(200):
         link.offer(i.to_bytes(2, 'big'), i * 0.001)
     out = [int.from_bytes(p, 'big') for p in link.due(10.0)]
@@ -34,7 +46,7 @@ def test_jitter_keeps_order_unless_reorder():
 
 
 def test_jitter_spread():
-    link = LinkDirection(Conditions(delay=50.0, jitter=5.0, reorder=True), random.Random(2))
+    link = LinkDirection(cond(delay=50.0, jitter=5.0, reorder=True), random.Random(2))
     releases = []
     for i in range(2000):
         link.offer(b'p', 0.0)
@@ -47,7 +59,7 @@ def test_jitter_spread():
 
 
 def test_token_bucket_rate_and_bounded_queue():
-    link = LinkDirection(Conditions(rate=8.0, queue=10))            # 8 Mbit/s: 1000 B in 1 ms
+    link = LinkDirection(cond(rate=8.0, queue=10))            # 8 Mbit/s: 1000 B in 1 ms
     for i in range(50):                                              # a burst of 50 packets at t = 0
         link.offer(bytes(1000), 0.0)
     assert link.counters.dropped_queue == 40
@@ -57,7 +69,7 @@ def test_token_bucket_rate_and_bounded_queue():
         times += [t] * len(link.due(t))
     assert times == pytest.approx([0.001 * (i + 1) for i in range(10)])
     # steady offered load above the rate: delivered throughput equals the rate
-    link = LinkDirection(Conditions(rate=8.0, queue=20))
+    link = LinkDirection(cond(rate=8.0, queue=20))
     for i in range(2000):
         link.offer(bytes(1000), i * 0.0005)                          # 16 Mbit/s offered
     delivered = len(link.due(1.0))
@@ -65,7 +77,7 @@ def test_token_bucket_rate_and_bounded_queue():
 
 
 def test_loss_rate_and_outage():
-    link = LinkDirection(Conditions(loss=0.2), random.Random(3))
+    link = LinkDirection(cond(loss=0.2), random.Random(3))
     for i in range(10000):
         link.offer(b'p', 0.0)
     assert link.counters.dropped_loss / 10000 == pytest.approx(0.2, abs=0.02)
@@ -75,11 +87,11 @@ def test_loss_rate_and_outage():
 
 def test_conditions_validation():
     with pytest.raises(ValueError):
-        Conditions(delay=-1.0).validate()
+        cond(delay=-1.0).validate()
     with pytest.raises(ValueError):
-        Conditions().updated(loss=1.5)
+        cond().updated(loss=1.5)
     with pytest.raises(ValueError):
-        Conditions().updated(colour='red')
+        cond().updated(colour='red')
 
 
 def test_repository_config_and_overrides(workspace):
@@ -97,15 +109,20 @@ def write(tmp_path, name, text):
     return str(p)
 
 
-@pytest.mark.parametrize('text, field', [
-    ('testbed: {robot: {address: 10.0.0.1}, cloud: {address: 10.0.0.1}}', 'address'),
-    ('testbed: {robot: {address: nope}, cloud: {address: 10.0.0.2}}', 'address'),
-    ('testbed: {robot: {address: 10.0.0.1}, cloud: {address: 10.0.0.2}, link: {both: {delay: -5}}}', 'delay'),
-    ('testbed: {robot: {address: 10.0.0.1, namespace: "bad name"}, cloud: {address: 10.0.0.2}}', 'namespace'),
+@pytest.mark.parametrize('change, field', [
+    (lambda t: t['cloud'].update(address='10.77.0.1'), 'address'),
+    (lambda t: t['robot'].update(address='nope'), 'address'),
+    (lambda t: t['link']['both'].update(delay=-5), 'delay'),
+    (lambda t: t['robot'].update(namespace='bad name'), 'namespace'),
+    (lambda t: t.pop('mtu'), 'testbed.mtu: missing'),
+    (lambda t: t['robot'].pop('device'), 'testbed.robot.device: missing'),
+    (lambda t: t['link']['both'].pop('queue'), 'testbed.link.both.queue: missing'),
 ])
-def test_bad_testbed_config(tmp_path, text, field):
+def test_bad_testbed_config(tmp_path, change, field):
+    doc = copy.deepcopy(load_yaml(TESTBED_YAML))
+    change(doc['testbed'])
     with pytest.raises(ConfigError) as err:
-        load_testbed(write(tmp_path, 'tb.yaml', text))
+        load_testbed(write(tmp_path, 'tb.yaml', yaml.safe_dump(doc)))
     assert field in str(err.value) and 'tb.yaml' in str(err.value)
 
 
@@ -124,5 +141,8 @@ def test_trace_parsing_and_errors(tmp_path):
 
 def test_bad_link_map(tmp_path):
     with pytest.raises(ConfigError) as err:
-        load_link_map(write(tmp_path, 'lm.yaml', 'link_map: {regions: [{name: a, x: [2, 1], y: [0, 1]}]}'))
+        load_link_map(write(tmp_path, 'lm.yaml', yaml.safe_dump(
+            {'link_map': {'default': IDEAL, 'regions': [{'name': 'a', 'x': [2, 1], 'y': [0, 1]}]}})))
     assert 'regions[0].x' in str(err.value)
+    with pytest.raises(ConfigError, match='link_map.default.jitter: missing'):
+        load_link_map(write(tmp_path, 'lm.yaml', 'link_map: {default: {delay: 1.0}, regions: []}'))

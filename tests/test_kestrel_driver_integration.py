@@ -7,7 +7,7 @@ import threading
 
 import pytest
 
-from rosharness import wait_for
+from cnr_harness import wait_until
 
 rospy = pytest.importorskip('rospy')
 
@@ -39,18 +39,18 @@ def test_device_mode_over_a_pty(ros, workspace, tmp_path):
     try:
         def send(fd, text):
             os.write(fd, text.encode())
-        wait_for(lambda: (send(m1, '23.4\r\n'), len(got) > 0)[1] or not proc.alive(), 60, 'a first temperature')
+        wait_until(lambda: (send(m1, '23.4\r\n'), len(got) > 0)[1] or not proc.alive(), 60, 'a first temperature')
         assert proc.alive() and got[0] == pytest.approx(23.4)
         send(m1, 'garbage!!\n$KES,abc*00\n')
         send(m1, 'T,24.5\n')
-        wait_for(lambda: any(abs(v - 24.5) < 1e-6 for v in got), 30, 'the value after garbage lines')
+        wait_until(lambda: any(abs(v - 24.5) < 1e-6 for v in got), 30, 'the value after garbage lines')
         # the device vanishes; a new one appears under the same name
         os.close(m1)
         os.close(s1)
         m2, name2, s2 = open_pty()
         os.remove(link)
         os.symlink(name2, link)
-        wait_for(lambda: (send(m2, 'TEMP,25.5,C\n'), any(abs(v - 25.5) < 1e-6 for v in got))[1], 60,
+        wait_until(lambda: (send(m2, 'TEMP,25.5,C\n'), any(abs(v - 25.5) < 1e-6 for v in got))[1], 60,
                  'a value after reconnecting')
         assert proc.alive()
         out = proc.output()

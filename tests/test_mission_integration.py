@@ -6,7 +6,7 @@ import subprocess
 
 import pytest
 
-from rosharness import wait_for
+from cnr_harness import wait_until
 
 rospy = pytest.importorskip('rospy')
 
@@ -32,7 +32,7 @@ def test_mission_finds_hotspot_and_survives_a_restart(mission, ros):
     from cnr_msgs.msg import Hotspot
     proc, report = mission
     store = os.path.join(report, 'store.tsv')
-    wait_for(lambda: os.path.exists(store) and len(stored_lines(store)) >= 60 or not proc.alive(), 240,
+    wait_until(lambda: os.path.exists(store) and len(stored_lines(store)) >= 60 or not proc.alive(), 240,
              '60 stored measurements')
     assert proc.alive(), proc.output()[-3000:]
     before = len(stored_lines(store))
@@ -48,12 +48,12 @@ def test_mission_finds_hotspot_and_survives_a_restart(mission, ros):
             return res if len(res.measurements) >= before else None
         except (rospy.ROSException, rospy.ServiceException):
             return None
-    res = wait_for(reloaded, 60, 'local_mapcell_manager back with its measurements')
+    res = wait_until(reloaded, 60, 'local_mapcell_manager back with its measurements')
     numbers = [m.header.seq for m in res.measurements]
     assert numbers[:before] == list(range(1, before + 1))
 
     summary_path = os.path.join(report, 'summary.json')
-    wait_for(lambda: os.path.exists(summary_path) or not proc.alive() and not os.path.exists(summary_path), 600,
+    wait_until(lambda: os.path.exists(summary_path) or not proc.alive() and not os.path.exists(summary_path), 600,
              'the mission report')
     summary = json.load(open(summary_path))
     assert summary['found'] is True, summary

@@ -1,5 +1,6 @@
 """multimaster_bridge without a master: sync rules, wire format, heartbeat estimation, configuration."""
 import math
+import os
 
 import pytest
 
@@ -159,7 +160,9 @@ def test_link_estimator_rtt_offset_and_loss():
 
 
 def section(**kw):
-    base = dict(name='robot', listen='10.77.0.1:11511', peers=[dict(name='cloud', address='10.77.0.2:11511')],
+    from cnr_params import load_yaml
+    base = load_yaml(os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'config', 'bridge.yaml'))
+    base.update(name='robot', listen='10.77.0.1:11511', peers=[dict(name='cloud', address='10.77.0.2:11511')],
                 secret='0123456789', allow_topics=['/tf'])
     base.update(kw)
     return Section({k: v for k, v in base.items() if v is not None}, '/bridge')
@@ -177,7 +180,9 @@ def test_config_parses_and_rejects_bad_values(tmp_path):
                       (dict(peers=[dict(name='cloud', address='h:99999')]), 'address'),
                       (dict(peers=[dict(name='robot', address='h:1')]), 'name'),
                       (dict(secret=None, secret_file=str(tmp_path / 'missing')), 'secret_file'),
-                      (dict(loss_timeout=0.1), 'loss_timeout'), (dict(allow_topics=[3]), 'allow_topics')):
+                      (dict(loss_timeout=0.1), 'loss_timeout'), (dict(allow_topics=[3]), 'allow_topics'),
+                      (dict(heartbeat_rate=None), 'heartbeat_rate: missing'),
+                      (dict(deny_services=None), 'deny_services: missing')):
         with pytest.raises(ConfigError) as err:
             config.parse(section(**kw))
         assert field in str(err.value) and str(err.value).startswith('/bridge: ')

@@ -11,7 +11,7 @@ import time
 
 import pytest
 
-from rosharness import WS, wait_for
+from cnr_harness import wait_until
 
 pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason='needs root (network namespaces and TUN devices)')
 
@@ -19,10 +19,10 @@ NAME = f'mmb{os.getpid() % 10000}'
 
 
 @pytest.fixture(scope='module')
-def hosts(tmp_path_factory):
+def hosts(tmp_path_factory, workspace):
     from cnr_testbed.api import Testbed
     from cnr_testbed.rosside import RosSide
-    tb = Testbed(os.path.join(WS, 'config', 'testbed.yaml'),
+    tb = Testbed(os.path.join(workspace, 'config', 'testbed.yaml'),
                  {'name': NAME, 'robot.namespace': f'{NAME}-robot', 'cloud.namespace': f'{NAME}-cloud'})
     tb.up()
     logs = tmp_path_factory.mktemp('mmb')
@@ -49,7 +49,7 @@ def bridged(hosts):
     tb, robot, cloud, secret = hosts
     tb.set('both', delay=0.0, loss=0.0, outage=False)
     procs = [start_bridge(robot, cloud, secret, **SETTINGS), start_bridge(cloud, robot, secret, **SETTINGS)]
-    wait_for(lambda: 'peer cloud is up' in log(procs[0]) and 'peer robot is up' in log(procs[1]), 30,
+    wait_until(lambda: 'peer cloud is up' in log(procs[0]) and 'peer robot is up' in log(procs[1]), 30,
              'the bridges to see each other')
     yield tb, robot, cloud, procs
     for side, proc in ((robot, procs[0]), (cloud, procs[1])):
@@ -77,16 +77,16 @@ def lines(proc, word):
 def test_new_publisher_reaches_the_other_master_within_half_a_second(bridged):
     tb, robot, cloud, _ = bridged
     pub = cloud.run(['rostopic', 'pub', '-r', '10', '/chatter', 'std_msgs/String', 'data: from-the-cloud'], 'pub')
-    local = wait_for(lambda: {n for n in publishers(cloud, '/chatter')}, 20, 'the publisher on the cloud master',
+    local = wait_until(lambda: {n for n in publishers(cloud, '/chatter')}, 20, 'the publisher on the cloud master',
                      interval=0.005)
     t_local = time.monotonic()
-    remote = wait_for(lambda: {n for n in publishers(robot, '/chatter') if n.startswith('/cloud/')}, 2,
+    remote = wait_until(lambda: {n for n in publishers(robot, '/chatter') if n.startswith('/cloud/')}, 2,
                       'the publisher on the robot master', interval=0.005)
     latency = time.monotonic() - t_local
     assert latency <= 0.5, f'sync took {latency:.3f} s'
     assert remote == {'/cloud' + n for n in local}
     echo = robot.run(['rostopic', 'echo', '/chatter'], 'echo')
-    wait_for(lambda: lines(echo, 'from-the-cloud') >= 3, 10, 'rostopic echo on the robot to receive')
+    wait_until(lambda: lines(echo, 'from-the-cloud') >= 3, 10, 'rostopic echo on the robot to receive')
     listing = robot.run(['rostopic', 'list'], 'list')
     listing.wait(30)
     with open(listing.log_path) as f:
@@ -97,7 +97,7 @@ def test_new_publisher_reaches_the_other_master_within_half_a_second(bridged):
 def test_rosservice_call_reaches_the_other_master(bridged):
     tb, robot, cloud, _ = bridged
     cloud.run(['rosrun', 'cnr_benchmarks', 'echo_monitor'], 'monitor')
-    wait_for(lambda: '/rtt/echo' in {s for s, _ in robot.call('getSystemState')[2]}, 20,
+    wait_until(lambda: '/rtt/echo' in {s for s, _ in robot.call('getSystemState')[2]}, 20,
              'the cloud service on the robot master')
     call = robot.run(['rosservice', 'call', '/rtt/echo', '{seq: 42}'], 'call')
     assert call.wait(30) == 0
@@ -109,12 +109,12 @@ def test_outage_removes_leases_and_the_return_resyncs_with_data_flowing(bridged)
     tb, robot, cloud, procs = bridged
     echo = robot.run(['rostopic', 'echo', '/chatter'], 'echo')
     cloud.run(['rostopic', 'pub', '-r', '20', '/chatter', 'std_msgs/String', 'data: tick'], 'pub')
-    wait_for(lambda: lines(echo, 'tick') >= 5, 20, 'data to flow before the outage')
+    wait_until(lambda: lines(echo, 'tick') >= 5, 20, 'data to flow before the outage')
 
     tb.set('both', outage=True)
     t_out = time.monotonic()
-    wait_for(lambda: 'peer cloud lost' in log(procs[0]), 5, 'the robot bridge to notice the loss')
-    wait_for(lambda: not {n for n in publishers(robot, '/chatter') if n.startswith('/cloud/')}, 5,
+    wait_until(lambda: 'peer cloud lost' in log(procs[0]), 5, 'the robot bridge to notice the loss')
+    wait_until(lambda: not {n for n in publishers(robot, '/chatter') if n.startswith('/cloud/')}, 5,
              'the lease to expire', interval=0.02)
     expired = time.monotonic() - t_out
     assert expired <= 3.0, f'remote registrations removed {expired:.2f} s after the outage began'
@@ -125,11 +125,11 @@ def test_outage_removes_leases_and_the_return_resyncs_with_data_flowing(bridged)
 
     tb.set('both', outage=False)
     t_back = time.monotonic()
-    wait_for(lambda: {n for n in publishers(robot, '/chatter') if n.startswith('/cloud/')}, 5,
+    wait_until(lambda: {n for n in publishers(robot, '/chatter') if n.startswith('/cloud/')}, 5,
              'the registrations to come back', interval=0.01)
     resync = time.monotonic() - t_back
     assert resync <= 1.0, f'resync took {resync:.2f} s'
-    wait_for(lambda: lines(echo, 'tick') >= before + 10, 10, 'the rospy subscriber to receive again')
+    wait_until(lambda: lines(echo, 'tick') >= before + 10, 10, 'the rospy subscriber to receive again')
     flowing = time.monotonic() - t_back
     assert flowing <= 2.0, f'data flowed again only {flowing:.2f} s after the link returned'
     print(f'lease expiry {expired:.2f} s, resync {resync:.2f} s, data again after {flowing:.2f} s')
@@ -145,7 +145,7 @@ def test_a_stranger_is_ignored_and_logged(hosts):
     bad = start_bridge(cloud, robot, wrong, **SETTINGS)
     try:
         cloud.run(['rostopic', 'pub', '-r', '5', '/chatter', 'std_msgs/String', 'data: stranger'], 'pub')
-        wait_for(lambda: 'bad HMAC' in log(good), 15, 'the robot bridge to log the stranger')
+        wait_until(lambda: 'bad HMAC' in log(good), 15, 'the robot bridge to log the stranger')
         time.sleep(1.0)   # give a (wrongly) accepted state time to show up
         assert not {n for n in publishers(robot, '/chatter') if n.startswith('/cloud/')}
         assert 'peer cloud is up' not in log(good)
@@ -161,11 +161,11 @@ def test_a_proxy_never_shuts_down_a_local_node_of_the_same_name(bridged):
     # a robot-local node that happens to be called /cloud/talker
     local = robot.run(['rostopic', 'pub', '-r', '5', '/chatter', 'std_msgs/String', 'data: local',
                        '__name:=talker', '__ns:=/cloud'], 'local')
-    wait_for(lambda: '/cloud/talker' in publishers(robot, '/chatter'), 20, 'the local /cloud/talker')
+    wait_until(lambda: '/cloud/talker' in publishers(robot, '/chatter'), 20, 'the local /cloud/talker')
     robot_uri = robot.call('lookupNode', '/cloud/talker')
     cloud.run(['rostopic', 'pub', '-r', '5', '/chatter', 'std_msgs/String', 'data: remote', '__name:=talker'],
               'remote')
-    wait_for(lambda: 'local node /cloud/talker has that name' in log(procs[0]), 20, 'the collision report')
+    wait_until(lambda: 'local node /cloud/talker has that name' in log(procs[0]), 20, 'the collision report')
     assert local.poll() is None, 'the local node was shut down'
     assert robot.call('lookupNode', '/cloud/talker') == robot_uri
 
@@ -173,13 +173,13 @@ def test_a_proxy_never_shuts_down_a_local_node_of_the_same_name(bridged):
 def test_service_handover_is_make_before_break(bridged):
     tb, robot, cloud, _ = bridged
     old = robot.run(['rosrun', 'cnr_benchmarks', 'echo_monitor'], 'monitor_robot')
-    wait_for(lambda: '/rtt/echo' in {s for s, _ in cloud.call('getSystemState')[2]}, 20,
+    wait_until(lambda: '/rtt/echo' in {s for s, _ in cloud.call('getSystemState')[2]}, 20,
              'the robot service on the cloud master')
     robot_api = robot.call('lookupService', '/rtt/echo')
     assert cloud.call('lookupService', '/rtt/echo') == robot_api
     cloud.run(['rosrun', 'cnr_benchmarks', 'echo_monitor'], 'monitor_cloud')
     # the newer provider (cloud) serves both masters
-    wait_for(lambda: robot.call('lookupService', '/rtt/echo') != robot_api
+    wait_until(lambda: robot.call('lookupService', '/rtt/echo') != robot_api
              and robot.call('lookupService', '/rtt/echo') == cloud.call('lookupService', '/rtt/echo'), 20,
              'the cloud provider to take over on both masters')
     robot.stop_proc(old)
@@ -192,9 +192,9 @@ def test_a_subscriber_hears_the_publishers_of_both_hosts(bridged):
     tb, robot, cloud, _ = bridged
     robot.run(['rostopic', 'pub', '-r', '10', '/chatter', 'std_msgs/String', 'data: robot-side'], 'pub_robot')
     cloud.run(['rostopic', 'pub', '-r', '10', '/chatter', 'std_msgs/String', 'data: cloud-side'], 'pub_cloud')
-    wait_for(lambda: len(publishers(robot, '/chatter')) == 2 and len(publishers(cloud, '/chatter')) == 2, 20,
+    wait_until(lambda: len(publishers(robot, '/chatter')) == 2 and len(publishers(cloud, '/chatter')) == 2, 20,
              'both publishers on both masters')
     for side in (robot, cloud):
         echo = side.run(['rostopic', 'echo', '/chatter'], f'echo_{side.side}')
-        wait_for(lambda: lines(echo, 'robot-side') >= 3 and lines(echo, 'cloud-side') >= 3, 20,
+        wait_until(lambda: lines(echo, 'robot-side') >= 3 and lines(echo, 'cloud-side') >= 3, 20,
                  f'the {side.side} subscriber to hear both publishers')

@@ -67,11 +67,11 @@ class _TopicProbe:
 def client_main() -> None:
     init_node('echo_client')
     p = private_section('~')
-    mode = p.string('mode', 'topic', choices=MODES)
-    samples = p.integer('samples', 20, minimum=1)
-    interval = p.number('interval', 0.5, nonnegative=True)
-    timeout = p.number('timeout', 10.0, positive=True)
-    output = p.string('output', '')
+    mode = p.string('mode', choices=MODES)
+    samples = p.integer('samples', minimum=1)
+    interval = p.number('interval', nonnegative=True)
+    timeout = p.number('timeout', positive=True)
+    output = p.string('output')
     rtts: List[float] = []
     if mode == 'topic':
         probe = _TopicProbe()

@@ -22,6 +22,7 @@ import sys
 from typing import Dict, List
 
 from cnr_benchmarks import report
+from cnr_params import load_yaml
 from cnr_benchmarks.core.stats import summarize
 
 PLACEMENTS = {   # name: (masters, client's master, monitor host, monitor's master)
@@ -47,13 +48,15 @@ BRIDGE_SETTINGS = dict(allow_topics=['/rtt/*'], allow_services=['/rtt/*'])
 
 def run_placement(tb, name: str, rtts: List[float], samples: int, interval: float, log: report.TsvLog,
                   work: str, secret: str) -> List[Dict]:
-    from cnr_testbed.rosside import RosSide, start_bridge, wait_until
+    from cnr_harness import wait_until
+    from cnr_testbed.rosside import RosSide, start_bridge
     masters, client_master, monitor_host, monitor_master = PLACEMENTS[name]
     port = 11411
     sides = {m: RosSide(tb, m, m, port, log_dir=work) for m in masters}
     client = RosSide(tb, 'robot', client_master, port, log_dir=work)
     monitor = RosSide(tb, monitor_host, monitor_master, port, log_dir=work)
     rows: List[Dict] = []
+    client_defaults = load_yaml(os.path.join(report.WS, 'config', 'echo_client.yaml'))   # as a launch file would
     tb.set('both', delay=0.0, jitter=0.0, loss=0.0, outage=False)
     try:
         for side in sides.values():
@@ -68,9 +71,10 @@ def run_placement(tb, name: str, rtts: List[float], samples: int, interval: floa
             tb.set('both', delay=rtt / 2.0)
             for mode in MODES:
                 out = os.path.join(work, f'{name}-{rtt:g}-{mode}.tsv')
-                proc = client.run(['rosrun', 'cnr_benchmarks', 'echo_client', f'_mode:={mode}',
-                                   f'_samples:={samples}', f'_interval:={interval}', f'_output:={out}',
-                                   '__name:=echo_client'], f'client_{name}_{rtt:g}_{mode}')
+                client.call('setParam', '/echo_client', dict(client_defaults, mode=mode, samples=samples,
+                                                             interval=interval, output=out))
+                proc = client.run(['rosrun', 'cnr_benchmarks', 'echo_client', '__name:=echo_client'],
+                                  f'client_{name}_{rtt:g}_{mode}')
                 code = proc.wait(600)
                 client.stop_proc(proc)
                 values = []

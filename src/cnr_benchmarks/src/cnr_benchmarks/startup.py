@@ -28,7 +28,7 @@ import yaml
 
 from cnr_benchmarks import report
 from cnr_benchmarks.core.stats import summarize
-from cnr_testbed.rosside import wait_until
+from cnr_harness import wait_until
 
 # thesis Appendix III, averages in ms (5 runs each); std.dev where Table 4-2 gives it
 THESIS_SM = {0: 13414.0, 20: 45332.0, 50: 95688.0, 100: 174452.0, 120: 200556.0, 140: 230206.0}

@@ -2,8 +2,9 @@
 
     /usr/bin/python3 -m cnr_navigation.bench [--out bench_results/navigation.json]
 
-Uses the TurtleBot configuration (robot radius 0.20 m, inflation 0.5 m, k 5, 640-beam scans,
-DWA with 6 x 20 samples over 1.0 s). Prints one line per figure and writes JSON.
+Uses the TurtleBot configuration as the move_base node reads it from config/navigation (robot radius
+0.20 m, inflation 0.5 m, k 5, DWA with 6 x 20 samples over 1.0 s) and 640-beam scans. Prints one line
+per figure and writes JSON.
 """
 from __future__ import annotations
 
@@ -16,29 +17,26 @@ import time
 
 import numpy as np
 
-from cnr_navigation.core.costmap import (CostmapConfig, GridGeometry, InflationLayerConfig, LayeredCostmap,
-                                         ObstacleLayerConfig, StaticLayerConfig, scan_to_observation)
-from cnr_navigation.core.dwa import DWAConfig, DWAController
+from cnr_navigation.core.costmap import GridGeometry, LayeredCostmap, scan_to_observation
+from cnr_navigation.core.dwa import DWAController
 from cnr_navigation.core.geometry import Pose2D
-from cnr_navigation.core.planner import GlobalPlanner, PlannerConfig, PlanningGrid
+from cnr_navigation.core.param_files import read_config
+from cnr_navigation.core.planner import GlobalPlanner, PlanningGrid
 
 WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
-INFLATION = InflationLayerConfig(inflation_radius=0.5, cost_scaling_factor=5.0)
 
 
 def hall_costmap() -> LayeredCostmap:
     from cnr_maps.mapio import load_map
     grid = load_map(os.path.join(WS, 'maps', 'datacenter.yaml'))
-    cfg = CostmapConfig(global_frame='map', robot_radius=0.20, static_layer=StaticLayerConfig(track_unknown_space=True),
-                        obstacle_layer=ObstacleLayerConfig(), inflation_layer=INFLATION)
-    cm = LayeredCostmap(cfg, 'global_costmap')
+    cm = LayeredCostmap(read_config(os.path.join(WS, 'config')).global_costmap.config, 'global_costmap')
     cm.set_map(grid.data, GridGeometry(grid.resolution, grid.origin[0], grid.origin[1], grid.width, grid.height))
     return cm
 
 
 def plan_times(n: int) -> list:
     cm = hall_costmap()
-    planner = GlobalPlanner(PlannerConfig(allow_unknown=False))
+    planner = GlobalPlanner(read_config(os.path.join(WS, 'config')).planner)
     grid = PlanningGrid(cm.costs, cm.geometry, None, cm.cfg.inscribed_radius)
     start, goal = Pose2D(1.0, 1.0, 0.0), Pose2D(19.0, 12.8, 0.0)     # opposite corners of the hall
     times = []
@@ -51,14 +49,10 @@ def plan_times(n: int) -> list:
 
 
 def control_times(n: int) -> list:
-    cfg = CostmapConfig(global_frame='odom', rolling_window=True, width=4.0, height=4.0, robot_radius=0.20,
-                        static_layer=None, obstacle_layer=ObstacleLayerConfig(min_obstacle_height=0.25,
-                                                                              max_obstacle_height=0.35),
-                        inflation_layer=INFLATION)
+    nav = read_config(os.path.join(WS, 'config'))
+    cfg = nav.local_costmap.config
     cm = LayeredCostmap(cfg, 'local_costmap')
-    dwa = DWAController(DWAConfig(max_vel_x=0.5, max_vel_trans=0.5, min_vel_y=0.0, max_vel_y=0.0, vy_samples=1,
-                                  vx_samples=6, vth_samples=20, sim_time=1.0, acc_lim_x=1.0, acc_lim_theta=2.0,
-                                  occdist_scale=0.5, path_distance_bias=64.0), 5.0)
+    dwa = DWAController(nav.dwa, nav.move_base.controller_frequency)
     dwa.set_plan(np.stack([np.linspace(0, 10, 201), 0.3 * np.sin(np.linspace(0, 3, 201)), np.zeros(201)], axis=1))
     fov = math.radians(58.0)
     rng = np.random.default_rng(0)

@@ -20,7 +20,7 @@ from cnr_navigation.cfg import Costmap2DConfig, GenericPluginConfig, InflationPl
 from cnr_navigation.core.costmap import (INSCRIBED_INFLATED_OBSTACLE, GridGeometry, LayeredCostmap, Observation,
                                          circle_footprint, occupancy_values, scan_to_observation)
 from cnr_navigation.core.geometry import IDENTITY, Pose2D
-from cnr_navigation.core.params import CostmapParams, SourceParams, parse_footprint
+from cnr_navigation.core.param_reader import CostmapParams, SourceParams, parse_footprint
 from cnr_navigation.core.planner import PlanningGrid
 from cnr_navigation.ros_io import TfHelper, footprint_msg
 

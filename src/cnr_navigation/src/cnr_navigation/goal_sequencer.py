@@ -28,13 +28,12 @@ class Goal:
 
 
 def load_goals(path: str) -> List[Goal]:
-    """Goals from a YAML file ``goals: [{name, x, y, yaw}, ...]`` (yaw in radians, default 0)."""
+    """Goals from a YAML file ``goals: [{name, x, y, yaw}, ...]`` (m, m, rad; every field required)."""
     doc = Section.from_file(path)
     items = doc.sections('goals')
     if not items:
         raise doc.error('goals', 'expected a non-empty list of {name, x, y, yaw}')
-    return [Goal(g.string('name', f'goal_{i + 1}'), g.number('x'), g.number('y'), g.number('yaw', 0.0))
-            for i, g in enumerate(items)]
+    return [Goal(g.string('name'), g.number('x'), g.number('y'), g.number('yaw')) for g in items]
 
 
 def wait_for_server(client, timeout: float) -> bool:

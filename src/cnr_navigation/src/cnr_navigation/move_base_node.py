@@ -29,8 +29,8 @@ from cnr_navigation.cfg import DWAPlannerConfig, MoveBaseConfig
 from cnr_navigation.core.dwa import DWAController
 from cnr_navigation.core.geometry import IDENTITY, Pose2D
 from cnr_navigation.core.move_base import MoveBaseCore, Velocity, goal_problem
-from cnr_navigation.core.params import (GLOBAL_PLANNERS, LOCAL_PLANNERS, NavigationParams, dwa_config,
-                                        move_base_config, read_navigation_params)
+from cnr_navigation.core.param_reader import NavigationParams, dwa_config, move_base_config, read_navigation_params
+from cnr_navigation.core.param_tables import GLOBAL_PLANNERS, LOCAL_PLANNERS
 from cnr_navigation.core.planner import GlobalPlanner, PlanningError, path_with_headings
 from cnr_navigation.core.recovery import ClearCostmapRecovery, Recovery, RotateRecovery
 from cnr_navigation.costmap_ros import CostmapROS

@@ -12,11 +12,12 @@ import tf2_ros
 from geometry_msgs.msg import Point32, PolygonStamped, PoseStamped, Quaternion, TransformStamped
 from nav_msgs.msg import Path
 
+from cnr_navigation.core.param_reader import missing
 from cnr_navigation.core.geometry import Pose2D, quaternion_to_yaw, yaw_to_quaternion
 
 
 class RosParamReader:
-    """:class:`cnr_navigation.core.params.ParamReader` on the parameter server, one XML-RPC call each.
+    """:class:`cnr_navigation.core.param_reader.ParamReader` on the parameter server, one XML-RPC call each.
 
     ``calls`` counts the calls by kind (getParam, hasParam, searchParam, setParam).
     """
@@ -24,9 +25,16 @@ class RosParamReader:
     def __init__(self) -> None:
         self.calls: Dict[str, int] = collections.Counter()
 
-    def get(self, name: str, default: Any) -> Any:
+    def get(self, name: str) -> Any:
         self.calls['getParam'] += 1
-        return rospy.get_param(name, default)
+        try:
+            return rospy.get_param(name)
+        except KeyError:
+            raise missing(name) from None
+
+    def get_optional(self, name: str) -> Optional[Any]:
+        self.calls['getParam'] += 1
+        return rospy.get_param(name, None)
 
     def has(self, name: str) -> bool:
         self.calls['hasParam'] += 1

@@ -13,21 +13,16 @@ import argparse
 import collections
 import json
 import os
-import signal
-import socket
-import subprocess
 import threading
 import time
 import xmlrpc.client
 from socketserver import ThreadingMixIn
 from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
 
-import yaml
+from cnr_harness import RosMaster, wait_until
+from cnr_navigation.core.param_files import navigation_tree
 
 WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
-NAV_FILES = [('costmap_common.yaml', 'global_costmap'), ('costmap_common.yaml', 'local_costmap'),
-             ('local_costmap.yaml', ''), ('global_costmap.yaml', ''), ('dwa_local_planner.yaml', ''),
-             ('global_planner.yaml', ''), ('move_base.yaml', '')]
 
 PARAM_METHODS = {'getParam', 'hasParam', 'searchParam', 'setParam', 'subscribeParam', 'unsubscribeParam',
                  'deleteParam', 'getParamNames'}
@@ -60,61 +55,30 @@ class RecordingProxy:
         self.server.shutdown()
 
 
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(('127.0.0.1', 0))
-        return s.getsockname()[1]
-
-
-def load_navigation_params(master: xmlrpc.client.ServerProxy, node: str = '/move_base',
-                           controller_frequency: float = 5.0) -> None:
+def load_navigation_params(master: xmlrpc.client.ServerProxy, node: str = '/move_base') -> None:
     """Set move_base's parameters as move_base.launch does (rosparam load of config/navigation/*.yaml)."""
-    for name, ns in NAV_FILES:
-        with open(os.path.join(WS, 'config', 'navigation', name)) as f:
-            data = yaml.safe_load(f) or {}
-        for key, value in data.items():
-            master.setParam('/audit', '/'.join(p for p in (node, ns, key) if p), value)
-    master.setParam('/audit', f'{node}/controller_frequency', controller_frequency)
+    for name, value in navigation_tree(os.path.join(WS, 'config'), node).items():
+        master.setParam('/audit', name, value)
 
 
 def audit(timeout: float = 120.0) -> dict:
-    port = _free_port()
-    uri = f'http://127.0.0.1:{port}/'
-    env = dict(os.environ, ROS_MASTER_URI=uri, ROS_IP='127.0.0.1')
-    procs = [subprocess.Popen(['rosmaster', '--core', '-p', str(port)], env=env, stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL, start_new_session=True)]
+    master = RosMaster(use_sim_time=True, caller='/audit')
     try:
-        master = xmlrpc.client.ServerProxy(uri)
-        deadline = time.monotonic() + 30
-        while True:
-            try:
-                master.getSystemState('/audit')
-                break
-            except OSError:
-                if time.monotonic() > deadline:
-                    raise RuntimeError('rosmaster did not start')
-                time.sleep(0.1)
-        master.setParam('/audit', '/use_sim_time', True)
-        procs.append(subprocess.Popen(['roslaunch', 'cnr_sim', 'simulator.launch', 'real_time_factor:=1'], env=env,
-                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True))
-        load_navigation_params(master)
-        os.environ.update(env)
+        master.roslaunch('cnr_sim', 'simulator.launch', 'real_time_factor:=1')
+        load_navigation_params(xmlrpc.client.ServerProxy(master.uri))
+        os.environ.update(master.env)
         import actionlib
         import rospy
         from move_base_msgs.msg import MoveBaseAction
         rospy.init_node('startup_audit', anonymous=True, disable_signals=True)
-        while rospy.Time.now().is_zero():
-            time.sleep(0.05)
-        proxy = RecordingProxy(uri)
-        node_env = dict(env, ROS_MASTER_URI=proxy.uri)
+        wait_until(lambda: not rospy.Time.now().is_zero(), 60, 'simulated time from the simulator')
+        proxy = RecordingProxy(master.uri)
         t0 = time.monotonic()
-        procs.append(subprocess.Popen(['rosrun', 'cnr_navigation', 'move_base', '__name:=move_base',
-                                       'cmd_vel:=mobile_base/commands/velocity'], env=node_env,
-                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True))
+        move_base = master.run(['rosrun', 'cnr_navigation', 'move_base', '__name:=move_base',
+                                'cmd_vel:=mobile_base/commands/velocity'], 'move_base', env={'ROS_MASTER_URI': proxy.uri})
         client = actionlib.SimpleActionClient('move_base', MoveBaseAction)
-        while not client.wait_for_server(rospy.Duration(0.2)):
-            if time.monotonic() - t0 > timeout:
-                raise RuntimeError('move_base did not become ready')
+        wait_until(lambda: client.wait_for_server(rospy.Duration(0.2)), timeout, 'the move_base action server',
+                   move_base)
         startup = time.monotonic() - t0
         time.sleep(1.0)                              # let calls still in flight finish (not part of the timing)
         with proxy.lock:
@@ -125,15 +89,7 @@ def audit(timeout: float = 120.0) -> dict:
                     registrations=sum(v for k, v in calls.items() if k in REGISTER_METHODS),
                     total_calls=sum(calls.values()), calls=calls)
     finally:
-        for p in reversed(procs):
-            try:
-                os.killpg(p.pid, signal.SIGINT)
-                p.wait(15)
-            except (ProcessLookupError, subprocess.TimeoutExpired):
-                try:
-                    os.killpg(p.pid, signal.SIGKILL)
-                except ProcessLookupError:
-                    pass
+        master.stop()
 
 
 def main() -> None:

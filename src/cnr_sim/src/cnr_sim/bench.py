@@ -9,25 +9,28 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
-import sys
 import time
-import xmlrpc.client
 
 import numpy as np
 
-from cnr_maps.pose import Pose2D
-from cnr_sim.core.kinematics import BaseLimits
-from cnr_sim.core.laser import LaserConfig
+from cnr_harness import RosMaster, wait_until
 from cnr_maps.mapio import load_map
-from cnr_sim.core.world import World, WorldConfig
+from cnr_maps.pose import Pose2D
+from cnr_sim.core.world import World
+from cnr_sim.params import config_section, read_laser, read_limits, read_world
 
 WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
 
 
+def turtlebot_world(map_yaml: str, start: Pose2D) -> World:
+    """The simulated TurtleBot 2 as config/ describes it (robot.yaml, laser.yaml)."""
+    sim = config_section(os.path.join(WS, 'config'))
+    return World(load_map(map_yaml), read_limits(sim), read_laser(sim), read_world(sim), start)
+
+
 def core_rtf(map_yaml: str, start: Pose2D, sim_seconds: float) -> tuple:
     """Real-time multiple of the world (50 Hz steps, 640-beam laser at 10 Hz, a driving robot)."""
-    world = World(load_map(map_yaml), BaseLimits(), LaserConfig(), WorldConfig(), start)
+    world = turtlebot_world(map_yaml, start)
     world.scan()                                     # compile / warm up
     steps = int(sim_seconds / world.config.step)
     rng = np.random.default_rng(1)
@@ -45,7 +48,7 @@ def core_rtf(map_yaml: str, start: Pose2D, sim_seconds: float) -> tuple:
 
 
 def scan_time(map_yaml: str, start: Pose2D, n: int = 2000) -> float:
-    world = World(load_map(map_yaml), BaseLimits(), LaserConfig(), WorldConfig(), start)
+    world = turtlebot_world(map_yaml, start)
     world.scan()
     t0 = time.perf_counter()
     for _ in range(n):
@@ -55,45 +58,21 @@ def scan_time(map_yaml: str, start: Pose2D, n: int = 2000) -> float:
 
 def ros_rtf(wall_seconds: float) -> float:
     """Run the simulator node as fast as possible on a private master; /clock advance per wall second."""
-    import socket
-    with socket.socket() as s:
-        s.bind(('127.0.0.1', 0))
-        port = s.getsockname()[1]
-    env = dict(os.environ, ROS_MASTER_URI=f'http://127.0.0.1:{port}/', ROS_IP='127.0.0.1')
-    procs = [subprocess.Popen(['rosmaster', '--core', '-p', str(port)], env=env, stdout=subprocess.DEVNULL,
-                              stderr=subprocess.DEVNULL, start_new_session=True)]
+    master = RosMaster(use_sim_time=True, caller='/sim_bench')
     try:
-        master = xmlrpc.client.ServerProxy(env['ROS_MASTER_URI'])
-        for _ in range(100):
-            try:
-                master.getSystemState('/bench')
-                break
-            except OSError:
-                time.sleep(0.1)
-        master.setParam('/bench', '/use_sim_time', True)
-        procs.append(subprocess.Popen(
-            ['roslaunch', 'cnr_sim', 'simulator.launch', 'real_time_factor:=0'], env=env,
-            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True))
-        os.environ.update(env)
+        sim = master.roslaunch('cnr_sim', 'simulator.launch', 'real_time_factor:=0')
+        os.environ.update(master.env)
         import rospy
         from rosgraph_msgs.msg import Clock
         rospy.init_node('sim_bench', anonymous=True, disable_signals=True)
         latest = {'t': 0.0}
         rospy.Subscriber('/clock', Clock, lambda m: latest.__setitem__('t', m.clock.to_sec()), queue_size=1)
-        deadline = time.monotonic() + 60
-        while latest['t'] < 1.0 and time.monotonic() < deadline:
-            time.sleep(0.05)
+        wait_until(lambda: latest['t'] >= 1.0, 60, '1 s of simulated time on /clock', sim)
         t_sim0, t_wall0 = latest['t'], time.monotonic()
-        time.sleep(wall_seconds)
+        time.sleep(wall_seconds)                     # the measurement window, not a synchronisation
         return (latest['t'] - t_sim0) / (time.monotonic() - t_wall0)
     finally:
-        import signal
-        for p in reversed(procs):
-            try:
-                os.killpg(p.pid, signal.SIGINT)
-                p.wait(15)
-            except (ProcessLookupError, subprocess.TimeoutExpired):
-                os.killpg(p.pid, signal.SIGKILL)
+        master.stop()
 
 
 def main() -> None:

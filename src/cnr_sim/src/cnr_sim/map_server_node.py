@@ -12,7 +12,7 @@ from nav_msgs.msg import MapMetaData, OccupancyGrid
 from nav_msgs.srv import GetMap, GetMapResponse
 
 import cnr_params
-from cnr_params.ros import init_node
+from cnr_params.ros import init_node, private_section
 from cnr_maps.mapio import OccupancyMap, load_map
 from cnr_sim.node import yaw_quaternion
 
@@ -38,11 +38,12 @@ def occupancy_grid(grid: OccupancyMap, frame_id: str, stamp) -> OccupancyGrid:
 def main() -> None:
     argv = rospy.myargv(sys.argv)
     init_node('map_server')
-    path = argv[1] if len(argv) > 1 else rospy.get_param('~map_file', '')
-    if not path:
+    params = private_section('~')
+    if len(argv) < 2 and 'map_file' not in params:
         raise cnr_params.ConfigError(rospy.get_name(), 'map_file', 'no map given (usage: map_server MAP.yaml)')
+    path = argv[1] if len(argv) > 1 else params.string('map_file')
     grid = load_map(path)
-    frame = rospy.get_param('~frame_id', 'map')
+    frame = params.string('frame_id')
     msg = occupancy_grid(grid, frame, rospy.Time.now())
     rospy.Publisher('map_metadata', MapMetaData, queue_size=1, latch=True).publish(msg.info)
     rospy.Publisher('map', OccupancyGrid, queue_size=1, latch=True).publish(msg)

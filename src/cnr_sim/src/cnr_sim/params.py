@@ -2,10 +2,11 @@
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
-from typing import List, Tuple
+import os
+from dataclasses import dataclass
+from typing import Any, Dict, List
 
-from cnr_params import Section
+from cnr_params import Section, load_yaml
 
 from cnr_sim.core.battery import BatteryConfig
 from cnr_maps.pose import Pose2D
@@ -13,6 +14,10 @@ from cnr_sim.core.kinematics import BaseLimits
 from cnr_sim.core.laser import LaserConfig
 from cnr_sim.core.obstacles import MovingObstacle, obstacles_from_config
 from cnr_sim.core.world import WorldConfig
+
+
+#: the files simulator.launch loads into the simulator's private namespace, in that order
+CONFIG_FILES = ('simulator.yaml', 'robot.yaml', 'laser.yaml', 'battery.yaml')
 
 
 @dataclass
@@ -31,58 +36,81 @@ class SimulatorParams:
     battery_measure_period: float
     battery_enabled: bool
     obstacles: List[MovingObstacle]
-    map_frame: str = 'map'
-    odom_frame: str = 'odom'
-    footprint_frame: str = 'base_footprint'
-    base_frame: str = 'base_link'
-    base_height: float = 0.0102
-    publish_map_to_odom: bool = True
-    seed: int = 0
-    frames: Tuple[str, ...] = field(default_factory=tuple)
+    map_frame: str
+    odom_frame: str
+    footprint_frame: str
+    base_frame: str
+    base_height: float
+    publish_map_to_odom: bool
+    seed: int
+
+
+def config_section(config_dir: str, **values: Any) -> Section:
+    """The simulator's private namespace as simulator.launch fills it from ``config_dir`` (plus ``values``).
+
+    For tools and tests that build the simulator's parts without a launch file.
+    """
+    data: Dict[str, Any] = {}
+    for name in CONFIG_FILES:
+        data.update(load_yaml(os.path.join(config_dir, name)))
+    data.update(values)
+    return Section(data, config_dir)
+
+
+def read_limits(p: Section) -> BaseLimits:
+    """``~base``: the base's limits."""
+    base = p.section('base')
+    return BaseLimits(
+        max_linear=base.number('max_linear', positive=True),
+        max_angular=math.radians(base.number('max_angular_deg', positive=True)),
+        max_linear_accel=base.number('max_linear_accel', positive=True),
+        max_angular_accel=base.number('max_angular_accel', positive=True),
+        wheel_separation=base.number('wheel_separation', positive=True),
+        watchdog_timeout=base.number('watchdog_timeout', positive=True))
+
+
+def read_world(p: Section) -> WorldConfig:
+    """``~step``, ``~base/radius``, ``~odom/noise_*``."""
+    odom = p.section('odom')
+    return WorldConfig(radius=p.section('base').number('radius', positive=True),
+                       step=p.number('step', positive=True, maximum=0.2),
+                       odom_noise_linear=odom.number('noise_linear', nonnegative=True),
+                       odom_noise_angular=odom.number('noise_angular', nonnegative=True))
+
+
+def read_laser(p: Section) -> LaserConfig:
+    """``~laser``: the fake laser."""
+    ls = p.section('laser')
+    offset = ls.vector('offset', 3)
+    laser = LaserConfig(beams=ls.integer('beams', minimum=1),
+                        fov=math.radians(ls.number('fov_deg', positive=True, maximum=360.0)),
+                        min_range=ls.number('min_range', nonnegative=True),
+                        max_range=ls.number('max_range', positive=True),
+                        rate=ls.number('rate', positive=True),
+                        noise_stddev=ls.number('noise_stddev', nonnegative=True),
+                        offset_x=offset[0], offset_y=offset[1])
+    if laser.min_range >= laser.max_range:
+        raise ls.error('min_range', f'must be below max_range ({laser.max_range})')
+    return laser
 
 
 def read_params(p: Section) -> SimulatorParams:
     """Build :class:`SimulatorParams` from the node's private namespace (errors name the field)."""
-    base = p.section('base', {})
-    limits = BaseLimits(
-        max_linear=base.number('max_linear', 0.70, positive=True),
-        max_angular=math.radians(base.number('max_angular_deg', 180.0, positive=True)),
-        max_linear_accel=base.number('max_linear_accel', 1.0, positive=True),
-        max_angular_accel=base.number('max_angular_accel', 2.0, positive=True),
-        wheel_separation=base.number('wheel_separation', 0.230, positive=True),
-        watchdog_timeout=base.number('watchdog_timeout', 0.6, positive=True))
-    odom = p.section('odom', {})
-    world = WorldConfig(radius=base.number('radius', 0.178, positive=True),
-                        step=p.number('step', 0.02, positive=True, maximum=0.2),
-                        odom_noise_linear=odom.number('noise_linear', 0.0, nonnegative=True),
-                        odom_noise_angular=odom.number('noise_angular', 0.0, nonnegative=True))
-    ls = p.section('laser', {})
-    offset = ls.vector('offset', 3, [-0.087, 0.0125, 0.287])
-    beams = ls.integer('beams', 640, minimum=1)
-    laser = LaserConfig(beams=beams, fov=math.radians(ls.number('fov_deg', 58.0, positive=True, maximum=360.0)),
-                        min_range=ls.number('min_range', 0.45, nonnegative=True),
-                        max_range=ls.number('max_range', 5.0, positive=True),
-                        rate=ls.number('rate', 10.0, positive=True),
-                        noise_stddev=ls.number('noise_stddev', 0.0, nonnegative=True),
-                        offset_x=offset[0], offset_y=offset[1])
-    if laser.min_range >= laser.max_range:
-        raise ls.error('min_range', f'must be below max_range ({laser.max_range})')
-    bat = p.section('battery', {})
-    pose = p.vector('initial_pose', 3, [0.5, 0.0, 0.0])
+    base, odom, ls, bat = p.section('base'), p.section('odom'), p.section('laser'), p.section('battery')
     return SimulatorParams(
         map_file=p.string('map_file'),
-        real_time_factor=p.number('real_time_factor', 1.0, nonnegative=True),
-        initial_pose=Pose2D(*pose), limits=limits, world=world, laser=laser,
-        laser_frame=ls.string('frame_id', 'camera_depth_frame'), laser_offset_z=offset[2],
+        real_time_factor=p.number('real_time_factor', nonnegative=True),
+        initial_pose=Pose2D(*p.vector('initial_pose', 3)), limits=read_limits(p), world=read_world(p),
+        laser=read_laser(p), laser_frame=ls.string('frame_id'), laser_offset_z=ls.vector('offset', 3)[2],
         battery=BatteryConfig.from_section(bat),
-        battery_rate=bat.number('publish_rate', 1.0, positive=True),
-        battery_interface=bat.string('interface', ''),
-        battery_measure_period=bat.number('measure_period', 1.0, positive=True),
-        battery_enabled=bat.boolean('measure_work', True),
-        obstacles=obstacles_from_config(p) if p.boolean('enable_obstacles', False) else [],
-        map_frame=p.string('map_frame', 'map'), odom_frame=odom.string('frame_id', 'odom'),
-        footprint_frame=odom.string('child_frame_id', 'base_footprint'),
-        base_frame=p.string('base_frame', 'base_link'),
-        base_height=base.number('height', 0.0102),
-        publish_map_to_odom=p.boolean('publish_map_to_odom', True),
-        seed=p.integer('seed', 0))
+        battery_rate=bat.number('publish_rate', positive=True),
+        battery_interface=bat.string('interface'),
+        battery_measure_period=bat.number('measure_period', positive=True),
+        battery_enabled=bat.boolean('measure_work'),
+        obstacles=obstacles_from_config(p) if p.boolean('enable_obstacles') else [],
+        map_frame=p.string('map_frame'), odom_frame=odom.string('frame_id'),
+        footprint_frame=odom.string('child_frame_id'),
+        base_frame=p.string('base_frame'),
+        base_height=base.number('height'),
+        publish_map_to_odom=p.boolean('publish_map_to_odom'),
+        seed=p.integer('seed'))

@@ -9,63 +9,24 @@ Used by the benchmarks and the integration tests::
         ...
         cloud.stop(); robot.stop()
 
-Every process runs in its own process group and is stopped with SIGINT, then SIGTERM, then SIGKILL.
+Every process is a :class:`cnr_harness.Proc` (own process group, output in a file, stopped with SIGINT,
+then SIGTERM, then SIGKILL).
 """
 from __future__ import annotations
 
 import os
-import signal
-import socket
-import subprocess
 import tempfile
 import time
 import xmlrpc.client
-from typing import Callable, Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence
 
 import yaml
 
+from cnr_harness import Proc, free_port, wait_until
 from cnr_testbed import netns
 from cnr_testbed.api import Testbed
 
 BRIDGE_PORT = 11511
-
-
-def wait_until(condition: Callable[[], bool], timeout: float, what: str,
-               proc: Optional[subprocess.Popen] = None, interval: float = 0.05) -> float:
-    """Poll ``condition`` until true; returns the seconds waited.
-
-    Raises RuntimeError naming ``what`` after ``timeout`` s, or at once if ``proc`` exits first.
-    """
-    start = time.monotonic()
-    while not condition():
-        if proc is not None and proc.poll() is not None:
-            raise RuntimeError(f'{what}: process exited with {proc.returncode} '
-                               f'(see {getattr(proc, "log_path", "its output")})')
-        if time.monotonic() - start > timeout:
-            raise RuntimeError(f'timed out after {timeout:.0f} s waiting for {what}')
-        time.sleep(interval)
-    return time.monotonic() - start
-
-
-def stop_process(proc: subprocess.Popen, timeout: float = 10.0) -> Optional[int]:
-    """Stop a process group like roslaunch stops its nodes."""
-    if proc.poll() is None:
-        for sig, wait in ((signal.SIGINT, timeout), (signal.SIGTERM, 3.0), (signal.SIGKILL, 3.0)):
-            try:
-                os.killpg(proc.pid, sig)
-            except ProcessLookupError:
-                break
-            try:
-                proc.wait(wait)
-                break
-            except subprocess.TimeoutExpired:
-                continue
-    else:
-        try:
-            os.killpg(proc.pid, signal.SIGKILL)
-        except (ProcessLookupError, PermissionError):
-            pass
-    return proc.returncode
 
 
 class RosSide:
@@ -87,23 +48,19 @@ class RosSide:
         self.address = testbed.robot_address if side == 'robot' else testbed.cloud_address
         master_side = master_side or side
         master_address = testbed.robot_address if master_side == 'robot' else testbed.cloud_address
-        self.port = port or master_port or _random_port()
+        self.port = port or master_port or free_port()
         self.master_uri = f'http://{master_address}:{self.port}/'
         self.env = dict(os.environ, ROS_MASTER_URI=self.master_uri, ROS_IP=self.address,
                         ROS_HOME=os.environ.get('ROS_HOME', os.path.expanduser('~/.ros')))
         self.env.pop('ROS_HOSTNAME', None)
         self.log_dir = log_dir or tempfile.mkdtemp(prefix=f'cnr-{side}-')
-        self.procs: List[subprocess.Popen] = []
-        self.master: Optional[subprocess.Popen] = None
+        self.procs: List[Proc] = []
+        self.master: Optional[Proc] = None
 
-    def run(self, argv: Sequence[str], log_name: str = 'proc', env: Optional[Dict[str, str]] = None) -> subprocess.Popen:
+    def run(self, argv: Sequence[str], log_name: str = 'proc', env: Optional[Dict[str, str]] = None) -> Proc:
         """Start ``argv`` inside this side's namespace; stopped by :meth:`stop`."""
-        log = open(os.path.join(self.log_dir, f'{log_name}-{time.monotonic_ns()}.log'), 'wb')
-        proc = subprocess.Popen(['ip', 'netns', 'exec', self.namespace, *argv], env=dict(self.env, **(env or {})),
-                                stdout=log, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-                                start_new_session=True)
-        proc.log_path = log.name  # type: ignore[attr-defined]
-        log.close()
+        proc = Proc(['ip', 'netns', 'exec', self.namespace, *argv],
+                    os.path.join(self.log_dir, f'{log_name}-{time.monotonic_ns()}.log'), dict(self.env, **(env or {})))
         self.procs.append(proc)
         return proc
 
@@ -127,23 +84,16 @@ class RosSide:
         except (OSError, RuntimeError):
             return False
 
-    def stop_proc(self, proc: subprocess.Popen) -> None:
-        stop_process(proc)
+    def stop_proc(self, proc: Proc) -> None:
+        proc.stop()
         if proc in self.procs:
             self.procs.remove(proc)
 
     def stop(self) -> None:
         for proc in reversed(self.procs):
-            stop_process(proc)
+            proc.stop()
         self.procs.clear()
         self.master = None
-
-
-def _random_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(('127.0.0.1', 0))
-        port = s.getsockname()[1]
-    return port if port != 11311 else _random_port()
 
 
 def bridge_config(side: RosSide, peer: RosSide, secret_file: str, **settings) -> str:
@@ -157,7 +107,7 @@ def bridge_config(side: RosSide, peer: RosSide, secret_file: str, **settings) ->
     return path
 
 
-def start_bridge(side: RosSide, peer: RosSide, secret_file: str, **settings) -> subprocess.Popen:
+def start_bridge(side: RosSide, peer: RosSide, secret_file: str, **settings) -> Proc:
     """The multimaster bridge of ``side`` (rosrun, parameters from a YAML file written for it)."""
     path = bridge_config(side, peer, secret_file, **settings)
     return side.run(['roslaunch', 'multimaster_bridge', 'bridge.launch', f'config:={path}',

@@ -27,7 +27,7 @@ Semantics kept from costmap_2d (navigation@noetic-devel):
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -48,12 +48,12 @@ NO_INFORMATION = 255
 class StaticLayerConfig:
     """``~<costmap>/static_layer/*`` (costmap_2d StaticLayer)."""
 
-    enabled: bool = True
-    track_unknown_space: bool = False
-    lethal_cost_threshold: int = 100
-    unknown_cost_value: int = -1
-    trinary_costmap: bool = True
-    use_maximum: bool = False
+    enabled: bool
+    track_unknown_space: bool
+    lethal_cost_threshold: int
+    unknown_cost_value: int
+    trinary_costmap: bool
+    use_maximum: bool
 
 
 @dataclass
@@ -68,27 +68,27 @@ class ObstacleLayerConfig:
         inf_is_valid: out-of-range readings (inf or >= range_max) clear up to raytrace_range.
     """
 
-    enabled: bool = True
-    footprint_clearing_enabled: bool = True
-    combination_method: int = 1
-    track_unknown_space: bool = False
-    obstacle_range: float = 2.5
-    raytrace_range: float = 3.0
-    min_obstacle_height: float = 0.0
-    max_obstacle_height: float = 2.0
-    inf_is_valid: bool = False
-    marking: bool = True
-    clearing: bool = True
+    enabled: bool
+    footprint_clearing_enabled: bool
+    combination_method: int
+    track_unknown_space: bool
+    obstacle_range: float
+    raytrace_range: float
+    min_obstacle_height: float
+    max_obstacle_height: float
+    inf_is_valid: bool
+    marking: bool
+    clearing: bool
 
 
 @dataclass
 class InflationLayerConfig:
     """``~<costmap>/inflation_layer/*`` (costmap_2d InflationLayer)."""
 
-    enabled: bool = True
-    inflation_radius: float = 0.55
-    cost_scaling_factor: float = 10.0
-    inflate_unknown: bool = False
+    enabled: bool
+    inflation_radius: float
+    cost_scaling_factor: float
+    inflate_unknown: bool
 
 
 @dataclass
@@ -103,22 +103,22 @@ class CostmapConfig:
         footprint_padding: added to the radius [m].
     """
 
-    global_frame: str = 'map'
-    robot_base_frame: str = 'base_link'
-    rolling_window: bool = False
-    width: float = 10.0
-    height: float = 10.0
-    resolution: float = 0.05
-    origin_x: float = 0.0
-    origin_y: float = 0.0
-    robot_radius: float = 0.46
-    footprint_padding: float = 0.01
-    update_frequency: float = 5.0
-    publish_frequency: float = 0.0
-    transform_tolerance: float = 0.3
-    static_layer: Optional[StaticLayerConfig] = field(default_factory=StaticLayerConfig)
-    obstacle_layer: Optional[ObstacleLayerConfig] = field(default_factory=ObstacleLayerConfig)
-    inflation_layer: Optional[InflationLayerConfig] = field(default_factory=InflationLayerConfig)
+    global_frame: str
+    robot_base_frame: str
+    rolling_window: bool
+    width: float
+    height: float
+    resolution: float
+    origin_x: float
+    origin_y: float
+    robot_radius: float
+    footprint_padding: float
+    update_frequency: float
+    publish_frequency: float
+    transform_tolerance: float
+    static_layer: Optional[StaticLayerConfig]
+    obstacle_layer: Optional[ObstacleLayerConfig]
+    inflation_layer: Optional[InflationLayerConfig]
 
     @property
     def inscribed_radius(self) -> float:
@@ -163,16 +163,18 @@ def inflation_cost_of_distance(distance_m: np.ndarray, resolution: float, inscri
     return cost.astype(np.uint8)
 
 
-def inflate(master: np.ndarray, resolution: float, inscribed_radius: float, cfg: InflationLayerConfig) -> np.ndarray:
+def inflate(master: np.ndarray, resolution: float, inscribed_radius: float,
+            cfg: Optional[InflationLayerConfig]) -> np.ndarray:
     """Apply the inflation layer to a master grid (uint8) and return the new grid.
 
     Distances to the nearest LETHAL cell come from ``distance_transform_edt``, computed only in
     the bounding box of the lethal cells grown by the inflation radius (cells outside it are
     farther than the radius and get no inflation cost). NO_INFORMATION cells take the inflation
-    cost only if it is >= INSCRIBED (or > 0 with ``inflate_unknown``), as costmap_2d does.
+    cost only if it is >= INSCRIBED (or > 0 with ``inflate_unknown``), as costmap_2d does. No layer
+    (``cfg`` None) or a disabled one inflates nothing.
     """
     lethal = master == LETHAL_OBSTACLE
-    if not cfg.enabled or not lethal.any():
+    if cfg is None or not cfg.enabled or not lethal.any():
         return master.copy()
     cell_radius = int(math.ceil(cfg.inflation_radius / resolution - 1e-9))
     rows = np.flatnonzero(lethal.any(axis=1))
@@ -535,7 +537,7 @@ class LayeredCostmap:
             frame_to_map = self._frame_to_map
         self._frame_to_map = frame_to_map
         g = self.geometry
-        inflation = self.cfg.inflation_layer or InflationLayerConfig(enabled=False)
+        inflation = self.cfg.inflation_layer
         if static_changed or self.cfg.rolling_window or self.static_costs.shape != (g.height, g.width):
             static = self._static_window(frame_to_map)
             if static is None:

@@ -51,43 +51,43 @@ Velocity = Tuple[float, float]
 class DWAConfig:
     """``~DWAPlannerROS/*`` (DWAPlanner.cfg and local_planner_limits; units m, rad, s)."""
 
-    max_vel_trans: float = 0.55
-    min_vel_trans: float = 0.1
-    max_vel_x: float = 0.55
-    min_vel_x: float = 0.0
-    max_vel_y: float = 0.1
-    min_vel_y: float = -0.1
-    max_vel_theta: float = 1.0
-    min_vel_theta: float = 0.4
-    acc_lim_x: float = 2.5
-    acc_lim_y: float = 2.5
-    acc_lim_theta: float = 3.2
-    acc_lim_trans: float = 0.1
-    prune_plan: bool = False
-    xy_goal_tolerance: float = 0.1
-    yaw_goal_tolerance: float = 0.1
-    trans_stopped_vel: float = 0.1
-    theta_stopped_vel: float = 0.1
-    sim_time: float = 1.7
-    sim_granularity: float = 0.025
-    angular_sim_granularity: float = 0.1
-    path_distance_bias: float = 32.0
-    goal_distance_bias: float = 24.0
-    occdist_scale: float = 0.01
-    twirling_scale: float = 0.0
-    stop_time_buffer: float = 0.2
-    oscillation_reset_dist: float = 0.05
-    oscillation_reset_angle: float = 0.2
-    forward_point_distance: float = 0.325
-    scaling_speed: float = 0.25
-    max_scaling_factor: float = 0.2
-    vx_samples: int = 3
-    vy_samples: int = 10
-    vth_samples: int = 20
-    use_dwa: bool = True
-    latch_xy_goal_tolerance: bool = False
-    cheat_factor: float = 1.0
-    sum_scores: bool = False
+    max_vel_trans: float
+    min_vel_trans: float
+    max_vel_x: float
+    min_vel_x: float
+    max_vel_y: float
+    min_vel_y: float
+    max_vel_theta: float
+    min_vel_theta: float
+    acc_lim_x: float
+    acc_lim_y: float
+    acc_lim_theta: float
+    acc_lim_trans: float
+    prune_plan: bool
+    xy_goal_tolerance: float
+    yaw_goal_tolerance: float
+    trans_stopped_vel: float
+    theta_stopped_vel: float
+    sim_time: float
+    sim_granularity: float
+    angular_sim_granularity: float
+    path_distance_bias: float
+    goal_distance_bias: float
+    occdist_scale: float
+    twirling_scale: float
+    stop_time_buffer: float
+    oscillation_reset_dist: float
+    oscillation_reset_angle: float
+    forward_point_distance: float
+    scaling_speed: float
+    max_scaling_factor: float
+    vx_samples: int
+    vy_samples: int
+    vth_samples: int
+    use_dwa: bool
+    latch_xy_goal_tolerance: bool
+    cheat_factor: float
+    sum_scores: bool
 
 
 @dataclass

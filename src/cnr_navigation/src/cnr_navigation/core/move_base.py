@@ -62,19 +62,19 @@ class MoveBaseConfig:
     ``config/navigation/move_base_params.yaml``.
     """
 
-    controller_frequency: float = 20.0
-    planner_frequency: float = 0.0
-    controller_patience: float = 15.0
-    planner_patience: float = 5.0
-    max_planning_retries: int = -1
-    oscillation_timeout: float = 0.0
-    oscillation_distance: float = 0.5
-    recovery_behavior_enabled: bool = True
-    clearing_rotation_allowed: bool = True
-    conservative_reset_dist: float = 3.0
-    shutdown_costmaps: bool = False
-    make_plan_clear_costmap: bool = True
-    make_plan_add_unreachable_goal: bool = True
+    controller_frequency: float
+    planner_frequency: float
+    controller_patience: float
+    planner_patience: float
+    max_planning_retries: int
+    oscillation_timeout: float
+    oscillation_distance: float
+    recovery_behavior_enabled: bool
+    clearing_rotation_allowed: bool
+    conservative_reset_dist: float
+    shutdown_costmaps: bool
+    make_plan_clear_costmap: bool
+    make_plan_add_unreachable_goal: bool
 
 
 class NavigationBackend(Protocol):

@@ -50,11 +50,11 @@ class PlannerConfig:
         planner_window_x / planner_window_y: accepted for compatibility (the whole costmap is used).
     """
 
-    allow_unknown: bool = True
-    default_tolerance: float = 0.0
-    visualize_potential: bool = False
-    planner_window_x: float = 0.0
-    planner_window_y: float = 0.0
+    allow_unknown: bool
+    default_tolerance: float
+    visualize_potential: bool
+    planner_window_x: float
+    planner_window_y: float
 
 
 @dataclass

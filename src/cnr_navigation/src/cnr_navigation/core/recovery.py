@@ -7,7 +7,7 @@ clock. Defaults follow ``clear_costmap_recovery`` and ``rotate_recovery`` (noeti
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import List, Optional, Protocol, Tuple
 
 from cnr_navigation.core.geometry import Pose2D, normalize_angle
@@ -56,11 +56,11 @@ class Recovery:
 class ClearCostmapConfig:
     """``~<name>/*`` of a ClearCostmapRecovery (reset_distance [m])."""
 
-    reset_distance: float = 3.0
-    affected_maps: str = 'both'
-    layer_names: List[str] = field(default_factory=lambda: ['obstacle_layer'])
-    invert_area_to_clear: bool = False
-    force_updating: bool = False
+    reset_distance: float
+    affected_maps: str
+    layer_names: List[str]
+    invert_area_to_clear: bool
+    force_updating: bool
 
 
 class ClearCostmapRecovery(Recovery):
@@ -95,12 +95,12 @@ class RotateConfig:
         yaw_goal_tolerance: how close to a full turn counts as done [rad].
     """
 
-    sim_granularity: float = 0.017
-    frequency: float = 20.0
-    acc_lim_th: float = 3.2
-    max_rotational_vel: float = 1.0
-    min_in_place_rotational_vel: float = 0.4
-    yaw_goal_tolerance: float = 0.10
+    sim_granularity: float
+    frequency: float
+    acc_lim_th: float
+    max_rotational_vel: float
+    min_in_place_rotational_vel: float
+    yaw_goal_tolerance: float
 
 
 class RotateRecovery(Recovery):

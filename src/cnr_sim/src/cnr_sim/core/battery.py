@@ -20,35 +20,37 @@ from typing import Dict, Iterable, Optional, Set
 
 from cnr_params import Section
 
+GRAVITY = 9.81  # m/s^2
+
 
 @dataclass
 class BatteryConfig:
     """Constants of the model (every one set in config/battery.yaml with its source)."""
 
-    capacity_ah: float = 2.2
-    nominal_voltage: float = 14.8
-    full_voltage: float = 16.5
-    empty_voltage: float = 13.2
-    initial_percentage: float = 100.0
-    base_idle_power: float = 5.0
-    laptop_idle_power: float = 8.0
-    mass: float = 6.3
-    rolling_resistance: float = 0.02
-    yaw_inertia: float = 0.05
-    turn_resistance_power: float = 1.0
-    motor_efficiency: float = 0.5
-    cpu_joules_per_cpu_second: float = 7.5
-    radio_joules_per_byte: float = 7.0e-6
-    gravity: float = 9.81
+    capacity_ah: float
+    nominal_voltage: float
+    full_voltage: float
+    empty_voltage: float
+    initial_percentage: float
+    base_idle_power: float
+    laptop_idle_power: float
+    mass: float
+    rolling_resistance: float
+    yaw_inertia: float
+    turn_resistance_power: float
+    motor_efficiency: float
+    cpu_joules_per_cpu_second: float
+    radio_joules_per_byte: float
 
     @classmethod
     def from_section(cls, s: Section) -> 'BatteryConfig':
+        """Every constant from ``s`` (a missing one is a ConfigError naming it)."""
         kw = {}
-        for name, default in cls().__dict__.items():
+        for name in cls.__dataclass_fields__:
             if name in ('initial_percentage',):
-                kw[name] = s.number(name, default, minimum=0.0, maximum=100.0)
+                kw[name] = s.number(name, minimum=0.0, maximum=100.0)
             else:
-                kw[name] = s.number(name, default, nonnegative=True)
+                kw[name] = s.number(name, nonnegative=True)
         cfg = cls(**kw)
         for key in ('capacity_ah', 'nominal_voltage', 'motor_efficiency'):
             if not getattr(cfg, key) > 0:
@@ -90,7 +92,7 @@ class BatteryModel:
     def motor_power(self, v: float, w: float, accel: float, alpha: float) -> float:
         """Electrical motor power [W] for speed v [m/s], yaw rate w [rad/s] and their derivatives."""
         c = self.config
-        mech = (c.mass * c.gravity * c.rolling_resistance * abs(v) + c.mass * abs(accel * v)
+        mech = (c.mass * GRAVITY * c.rolling_resistance * abs(v) + c.mass * abs(accel * v)
                 + c.yaw_inertia * abs(alpha * w) + c.turn_resistance_power * abs(w) / math.pi)
         return mech / c.motor_efficiency
 

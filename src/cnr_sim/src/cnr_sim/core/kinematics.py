@@ -13,23 +13,23 @@ from cnr_maps.pose import Pose2D, wrap_angle  # noqa: F401 (Pose2D: the type int
 
 @dataclass
 class BaseLimits:
-    """Limits of the base (defaults: Kobuki specifications, TurtleBot velocity smoother).
+    """Limits of the base (the Kobuki / TurtleBot values are in config/robot.yaml ``base``).
 
     Attributes:
-        max_linear: maximum |v| [m/s] (Kobuki: 0.70).
-        max_angular: maximum |w| [rad/s] (Kobuki: 180 deg/s).
-        max_linear_accel: maximum |dv/dt| [m/s^2] (TurtleBot smoother: 1.0).
-        max_angular_accel: maximum |dw/dt| [rad/s^2] (TurtleBot smoother: 2.0).
-        wheel_separation: distance between the wheels [m] (Kobuki: 0.230).
-        watchdog_timeout: the base stops when no command arrived for this long [s] (Kobuki: 0.6).
+        max_linear: maximum |v| [m/s].
+        max_angular: maximum |w| [rad/s].
+        max_linear_accel: maximum |dv/dt| [m/s^2].
+        max_angular_accel: maximum |dw/dt| [rad/s^2].
+        wheel_separation: distance between the wheels [m].
+        watchdog_timeout: the base stops when no command arrived for this long [s].
     """
 
-    max_linear: float = 0.70
-    max_angular: float = math.pi
-    max_linear_accel: float = 1.0
-    max_angular_accel: float = 2.0
-    wheel_separation: float = 0.230
-    watchdog_timeout: float = 0.6
+    max_linear: float
+    max_angular: float
+    max_linear_accel: float
+    max_angular_accel: float
+    wheel_separation: float
+    watchdog_timeout: float
 
 
 def integrate(pose: Pose2D, v: float, w: float, dt: float) -> Pose2D:

@@ -19,25 +19,25 @@ from cnr_sim.core.raycast import cast_rays, circle_hits
 
 @dataclass
 class LaserConfig:
-    """Parameters of the fake laser.
+    """Parameters of the fake laser (the TurtleBot 2 Kinect values are in config/laser.yaml).
 
     Attributes:
-        beams: number of beams (Kinect/Stage model: 640).
-        fov: field of view [rad] (58 deg).
-        min_range / max_range: [m] (depthimage_to_laserscan on TurtleBot: 0.45; Stage TurtleBot model: 5.0).
-        rate: publication rate [Hz] (10).
+        beams: number of beams.
+        fov: field of view [rad].
+        min_range / max_range: [m].
+        rate: publication rate [Hz].
         noise_stddev: Gaussian range noise [m] (0 = none).
-        offset_x, offset_y: sensor position in base_footprint [m] (TurtleBot 2 camera_depth_frame).
+        offset_x, offset_y: sensor position in base_footprint [m].
     """
 
-    beams: int = 640
-    fov: float = math.radians(58.0)
-    min_range: float = 0.45
-    max_range: float = 5.0
-    rate: float = 10.0
-    noise_stddev: float = 0.0
-    offset_x: float = -0.087
-    offset_y: float = 0.0125
+    beams: int
+    fov: float
+    min_range: float
+    max_range: float
+    rate: float
+    noise_stddev: float
+    offset_x: float
+    offset_y: float
     relative_angles: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:

@@ -30,8 +30,8 @@ class MovingObstacle:
     waypoints: np.ndarray
     speed: float
     radius: float
-    loop: bool = False
-    start_delay: float = 0.0
+    loop: bool
+    start_delay: float
 
     def __post_init__(self) -> None:
         pts = np.asarray(self.waypoints, dtype=float)
@@ -67,10 +67,9 @@ def obstacles_from_config(section: Section) -> List[MovingObstacle]:
                     or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in p)):
                 raise item.error(f'waypoints[{i}]', f'expected [x, y] finite numbers, got {p!r}')
             pts.append([float(p[0]), float(p[1])])
-        out.append(MovingObstacle(name=item.string('name', f'obstacle_{len(out)}'), waypoints=np.array(pts),
+        out.append(MovingObstacle(name=item.string('name'), waypoints=np.array(pts),
                                   speed=item.number('speed', positive=True), radius=item.number('radius', positive=True),
-                                  loop=item.boolean('loop', False), start_delay=item.number('start_delay', 0.0,
-                                                                                            nonnegative=True)))
+                                  loop=item.boolean('loop'), start_delay=item.number('start_delay', nonnegative=True)))
     return out
 
 

@@ -36,16 +36,17 @@ class WorldConfig:
     """Physical parameters of the robot in the world.
 
     Attributes:
-        radius: robot footprint radius [m] (Kobuki body: 0.178).
-        step: integration step [s] (0.02 = Kobuki's 50 Hz packets).
+        radius: robot footprint radius [m].
+        step: integration step [s].
         odom_noise_linear: odometry noise: relative stddev of the measured linear speed (0.02 = 2 %).
         odom_noise_angular: relative stddev of the measured yaw rate.
+    (The TurtleBot 2 values are in config/robot.yaml.)
     """
 
-    radius: float = 0.178
-    step: float = 0.02
-    odom_noise_linear: float = 0.0
-    odom_noise_angular: float = 0.0
+    radius: float
+    step: float
+    odom_noise_linear: float
+    odom_noise_angular: float
 
 
 class World:

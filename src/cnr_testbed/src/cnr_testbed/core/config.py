@@ -8,7 +8,7 @@ from typing import Dict, List, Optional, Tuple
 
 from cnr_params import ConfigError, Section
 
-from cnr_testbed.core.link import Conditions
+from cnr_testbed.core.link import Conditions, check_changes
 
 NAME_RE = re.compile(r'^[A-Za-z0-9_.-]{1,15}$')
 CONDITION_KEYS = ('delay', 'jitter', 'loss', 'rate', 'queue', 'outage', 'reorder')
@@ -29,18 +29,18 @@ class TestbedConfig:
     down: Conditions          # cloud -> robot
 
 
-def _name(sec: Section, key: str, default: str) -> str:
-    v = sec.string(key, default)
+def _name(sec: Section, key: str) -> str:
+    v = sec.string(key)
     if not NAME_RE.match(v):
         raise sec.error(key, f"'{v}' is not a valid name (letters, digits, _.-, at most 15)")
     return v
 
 
 def conditions_from(sec: Section, base: Optional[Conditions] = None) -> Conditions:
-    base = base or Conditions()
+    """Conditions from ``sec``: every one required, or (with ``base``) only those that change ``base``."""
     kw = {}
     for key in CONDITION_KEYS:
-        if key in sec:
+        if base is None or key in sec:
             if key in ('outage', 'reorder'):
                 kw[key] = sec.boolean(key)
             elif key == 'queue':
@@ -52,7 +52,7 @@ def conditions_from(sec: Section, base: Optional[Conditions] = None) -> Conditio
     unknown = [k for k in sec.keys() if k not in CONDITION_KEYS]
     if unknown:
         raise sec.error(unknown[0], f'unknown condition (expected: {", ".join(CONDITION_KEYS)})')
-    return base.updated(**kw)
+    return base.updated(**kw) if base is not None else Conditions(**kw).validate()
 
 
 def load_testbed(path: str, overrides: Optional[Dict[str, str]] = None) -> TestbedConfig:
@@ -68,7 +68,7 @@ def load_testbed(path: str, overrides: Optional[Dict[str, str]] = None) -> Testb
     t = Section(data, path, 'testbed')
     robot = t.section('robot')
     cloud = t.section('cloud')
-    prefix = t.integer('prefix', 24, minimum=8, maximum=30)
+    prefix = t.integer('prefix', minimum=8, maximum=30)
     addrs = []
     for side, sec in (('robot', robot), ('cloud', cloud)):
         try:
@@ -77,13 +77,12 @@ def load_testbed(path: str, overrides: Optional[Dict[str, str]] = None) -> Testb
             raise sec.error('address', f"not an IPv4 address: {sec.raw('address')!r}") from None
     if addrs[0] == addrs[1]:
         raise cloud.error('address', 'must differ from the robot address')
-    link = t.section('link', {})
-    both = conditions_from(link.section('both', {}))
-    name = _name(t, 'name', 'cnr')
-    cfg = TestbedConfig(name=name, robot_ns=_name(robot, 'namespace', 'robot'),
-                        cloud_ns=_name(cloud, 'namespace', 'cloud'), robot_address=addrs[0], cloud_address=addrs[1],
-                        prefix=prefix, mtu=t.integer('mtu', 1500, minimum=576, maximum=65000),
-                        robot_dev=_name(robot, 'device', f'{name}-r'), cloud_dev=_name(cloud, 'device', f'{name}-c'),
+    link = t.section('link')
+    both = conditions_from(link.section('both'))
+    cfg = TestbedConfig(name=_name(t, 'name'), robot_ns=_name(robot, 'namespace'),
+                        cloud_ns=_name(cloud, 'namespace'), robot_address=addrs[0], cloud_address=addrs[1],
+                        prefix=prefix, mtu=t.integer('mtu', minimum=576, maximum=65000),
+                        robot_dev=_name(robot, 'device'), cloud_dev=_name(cloud, 'device'),
                         up=conditions_from(link.section('up', {}), both),
                         down=conditions_from(link.section('down', {}), both))
     if cfg.robot_ns == cfg.cloud_ns:
@@ -141,7 +140,7 @@ def load_trace(path: str) -> List[TraceStep]:
             except ValueError:
                 raise ConfigError(path, f'{where}.{key}', f'not a number: {cell!r}') from None
         try:
-            Conditions().updated(**changes)
+            check_changes(changes)
         except ValueError as exc:
             raise ConfigError(path, where, str(exc)) from None
         steps.append(TraceStep(t, direction, changes))
@@ -180,7 +179,7 @@ def load_link_map(path: str) -> LinkMap:
     """``link_map: {default: {conditions}, regions: [{name, x: [min, max], y: [min, max], <conditions>}]}``;
     a dead zone is a region with ``outage: true``."""
     doc = Section.from_file(path).section('link_map')
-    default = conditions_from(doc.section('default', {}))
+    default = conditions_from(doc.section('default'))
     regions = []
     for r in doc.sections('regions'):
         x = r.vector('x', 2)
@@ -188,6 +187,6 @@ def load_link_map(path: str) -> LinkMap:
         if not (x[0] < x[1] and y[0] < y[1]):
             raise r.error('x' if not x[0] < x[1] else 'y', 'expected [min, max] with min < max')
         cond = Section({k: v for k, v in r.data.items() if k not in ('name', 'x', 'y')}, r.source, r.prefix)
-        regions.append(Region(r.string('name', f'region_{len(regions)}'), x[0], x[1], y[0], y[1],
+        regions.append(Region(r.string('name'), x[0], x[1], y[0], y[1],
                               conditions_from(cond, default)))
     return LinkMap(regions, default)

@@ -29,33 +29,41 @@ class Conditions:
         reorder: let jitter reorder packets.
     """
 
-    delay: float = 0.0
-    jitter: float = 0.0
-    loss: float = 0.0
-    rate: float = 0.0
-    queue: int = 1000
-    outage: bool = False
-    reorder: bool = False
+    delay: float
+    jitter: float
+    loss: float
+    rate: float
+    queue: int
+    outage: bool
+    reorder: bool
 
     def validate(self, where: str = 'conditions') -> 'Conditions':
-        for name in ('delay', 'jitter', 'rate'):
-            v = getattr(self, name)
-            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v < 0:
-                raise ValueError(f'{where}.{name}: must be a finite number >= 0, got {v!r}')
-        if not isinstance(self.loss, (int, float)) or not 0.0 <= self.loss <= 1.0:
-            raise ValueError(f'{where}.loss: must be in [0, 1], got {self.loss!r}')
-        if not isinstance(self.queue, int) or self.queue < 1:
-            raise ValueError(f'{where}.queue: must be an integer >= 1, got {self.queue!r}')
+        check_changes(asdict(self), where)
         return self
 
     def updated(self, **changes: Any) -> 'Conditions':
-        known = {f.name for f in fields(self)}
-        unknown = set(changes) - known
-        if unknown:
-            raise ValueError(f'unknown condition(s): {", ".join(sorted(unknown))} (known: {", ".join(sorted(known))})')
+        check_changes(changes)
         d = asdict(self)
         d.update(changes)
         return Conditions(**d).validate()
+
+
+def check_changes(changes: Dict[str, Any], where: str = 'conditions') -> None:
+    """Raise ValueError naming the first unknown condition or bad value in ``changes`` (a partial mapping)."""
+    known = [f.name for f in fields(Conditions)]
+    unknown = set(changes) - set(known)
+    if unknown:
+        raise ValueError(f'unknown condition(s): {", ".join(sorted(unknown))} (known: {", ".join(sorted(known))})')
+    for name, v in changes.items():
+        if name in ('delay', 'jitter', 'rate'):
+            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v < 0:
+                raise ValueError(f'{where}.{name}: must be a finite number >= 0, got {v!r}')
+        elif name == 'loss':
+            if not isinstance(v, (int, float)) or not 0.0 <= v <= 1.0:
+                raise ValueError(f'{where}.loss: must be in [0, 1], got {v!r}')
+        elif name == 'queue':
+            if not isinstance(v, int) or v < 1:
+                raise ValueError(f'{where}.queue: must be an integer >= 1, got {v!r}')
 
 
 @dataclass
@@ -75,8 +83,8 @@ class LinkDirection:
         rng: random generator (loss, jitter).
     """
 
-    def __init__(self, conditions: Optional[Conditions] = None, rng: Optional[random.Random] = None) -> None:
-        self.conditions = (conditions or Conditions()).validate()
+    def __init__(self, conditions: Conditions, rng: Optional[random.Random] = None) -> None:
+        self.conditions = conditions.validate()
         self.rng = rng or random.Random()
         self.counters = Counters()
         self._heap: List[Tuple[float, int, bytes]] = []

@@ -25,10 +25,10 @@ class BridgeConfig:
     secret: bytes
     topics: Filter
     services: Filter
-    heartbeat_rate: float = 10.0
-    loss_timeout: float = 1.5
-    poll_rate: float = 10.0
-    quality_rate: float = 5.0
+    heartbeat_rate: float
+    loss_timeout: float
+    poll_rate: float
+    quality_rate: float
     extra: dict = field(default_factory=dict)
 
 
@@ -49,7 +49,7 @@ def parse_address(section: Section, key: str, default_host: str = '') -> Tuple[s
 
 
 def _globs(section: Section, key: str) -> List[str]:
-    value = section.raw(key, [])
+    value = section.raw(key)
     if value is None:
         return []
     if isinstance(value, str):
@@ -76,7 +76,9 @@ def parse(section: Section) -> BridgeConfig:
         raise section.error('peers', 'no peers configured (a list of {name, address})')
     if len({p.name for p in peers}) != len(peers):
         raise section.error('peers', 'peer names must be unique')
-    secret = section.string('secret', '')
+    if 'secret_file' not in section and 'secret' not in section:
+        raise section.error('secret', 'missing (set ~secret or ~secret_file)')
+    secret = section.string('secret') if 'secret' in section else ''
     if 'secret_file' in section:
         path = section.string('secret_file')
         try:
@@ -91,10 +93,10 @@ def parse(section: Section) -> BridgeConfig:
         name=name, listen=listen, peers=peers, secret=secret.encode(),
         topics=Filter(_globs(section, 'allow_topics'), _globs(section, 'deny_topics')),
         services=Filter(_globs(section, 'allow_services'), _globs(section, 'deny_services')),
-        heartbeat_rate=section.number('heartbeat_rate', 10.0, minimum=1.0, maximum=50.0),
-        loss_timeout=section.number('loss_timeout', 1.5, positive=True),
-        poll_rate=section.number('poll_rate', 10.0, minimum=1.0, maximum=100.0),
-        quality_rate=section.number('quality_rate', 5.0, positive=True))
+        heartbeat_rate=section.number('heartbeat_rate', minimum=1.0, maximum=50.0),
+        loss_timeout=section.number('loss_timeout', positive=True),
+        poll_rate=section.number('poll_rate', minimum=1.0, maximum=100.0),
+        quality_rate=section.number('quality_rate', positive=True))
     if cfg.loss_timeout < 3.0 / cfg.heartbeat_rate:
         raise section.error('loss_timeout', f'must cover at least 3 heartbeats ({3.0 / cfg.heartbeat_rate:.2f} s)')
     return cfg
