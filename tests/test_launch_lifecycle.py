@@ -20,8 +20,9 @@ pytest.importorskip('rospy')
 
 WS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CORRIDOR = os.path.join(WS, 'config', 'scenarios', 'corridor.yaml')
-# what roslaunch prints when a node does not stop on SIGINT within its timeout, or a required node dies
-ESCALATION = re.compile(r'escalating to SIG(TERM|KILL)|required SIGKILL|Shutdown errors|REQUIRED process')
+# what roslaunch prints when a node does not stop on SIGINT within its timeout or a required node dies, and
+# a node's traceback
+ESCALATION = re.compile(r'escalating to SIG(TERM|KILL)|required SIGKILL|Shutdown errors|REQUIRED process|Traceback')
 
 
 def _scenario(tmp_path, edit) -> str:
@@ -47,7 +48,8 @@ def test_a_node_configuration_error_ends_the_launch_with_exit_2_without_respawn(
     scenario = _scenario(tmp_path, grid_outside)
     with RosMaster(use_sim_time=True) as master:
         proc = master.run(_mission_argv(scenario, str(tmp_path / 'report')), log_name='bad_grid')
-        code = wait_until(proc.poll, 60, 'the launch to end after the configuration error', proc)
+        wait_until(lambda: not proc.alive(), 60, 'the launch to end after the configuration error')
+        code = proc.returncode
         out = proc.output()
     assert code == 2, out[-3000:]
     assert 'local_mapcell_manager exited with a configuration error' in out, out[-3000:]
@@ -68,7 +70,8 @@ def test_ctrl_c_stops_every_node_without_escalation(tmp_path):
                    120, 'stored measurements', proc)
         t0 = time.monotonic()
         os.killpg(proc.pid, signal.SIGINT)
-        code = wait_until(proc.poll, 60, 'the launch to stop after SIGINT', proc)
+        wait_until(lambda: not proc.alive(), 60, 'the launch to stop after SIGINT')
+        code = proc.returncode
         took = time.monotonic() - t0
         out = proc.output()
         left = [n for n in master.node_names() if n in nodes]

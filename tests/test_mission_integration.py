@@ -1,7 +1,9 @@
 """The corridor monitoring mission on a real master with real nodes: finds the heaters' cell, writes the
-report, and a restart of local_mapcell_manager mid-mission loses no stored measurement."""
+report, a restart of local_mapcell_manager mid-mission loses no stored measurement, and the run ends by
+itself, quietly (as launch_scripts/run_mission.sh runs it: cnr_launch --until mission_monitor)."""
 import json
 import os
+import re
 import subprocess
 
 import pytest
@@ -16,9 +18,10 @@ HEATER_CELL = 19            # col 8, row 1: x 8..9, y 0..1 in config/scenarios/c
 @pytest.fixture(scope='module')
 def mission(ros, workspace, tmp_path_factory):
     report = tmp_path_factory.mktemp('report')
-    proc = ros.master.roslaunch('cnr_mission', 'mission.launch', 'scenario:=corridor',
-                                f'map:={workspace}/maps/corridor.yaml', 'real_time_factor:=4',
-                                f'report_dir:={report}', f'store:={report}/store.tsv')
+    proc = ros.master.run(['rosrun', 'cnr_bringup', 'cnr_launch', '--until', 'mission_monitor',
+                           'cnr_mission', 'mission.launch', 'monitor_required:=false', 'scenario:=corridor',
+                           f'map:={workspace}/maps/corridor.yaml', 'real_time_factor:=4',
+                           f'report_dir:={report}', f'store:={report}/store.tsv'], log_name='mission')
     yield proc, report
     proc.stop()
 
@@ -66,3 +69,10 @@ def test_mission_finds_hotspot_and_survives_a_restart(mission, ros):
     numbers = [int(r.split('\t')[0]) for r in rows[1:]]
     assert numbers == list(range(1, len(numbers) + 1))           # nothing lost across the restart
     assert os.path.getsize(os.path.join(report, 'mapcells.png')) > 10000
+
+    # the launch ends by itself once the monitor is done: exit 0, no red lines, no traceback
+    wait_until(lambda: not proc.alive(), 120, 'the mission launch to end after its report')
+    out = proc.output()
+    assert proc.returncode == 0, out[-3000:]
+    red = re.findall(r'.*(?:REQUIRED process|escalating to SIG|required SIGKILL|Shutdown errors|Traceback).*', out)
+    assert not red, red

@@ -19,7 +19,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import signal
 import sys
 import threading
 from typing import List, Optional
@@ -81,6 +80,7 @@ def parse_args(argv: List[str]) -> argparse.Namespace:
 def main(argv: Optional[List[str]] = None) -> int:
     import roslaunch
     import roslaunch.parent
+    import roslaunch.pmon
     import roslaunch.rlutil
     from roslaunch.core import RLException
 
@@ -111,14 +111,6 @@ def main(argv: Optional[List[str]] = None) -> int:
     roslaunch.configure_logging(uuid)
     parent = Parent(uuid, [(launch_files[0], launch_args)])
 
-    def on_signal(signum, _frame) -> None:
-        outcome.finish(EXIT_INTERRUPTED, f'signal {signum}')
-        pm = holder.get('pm')
-        if pm is not None:
-            pm.shutdown()
-
-    signal.signal(signal.SIGINT, on_signal)
-    signal.signal(signal.SIGTERM, on_signal)
     try:
         parent.start()
         parent.spin()            # returns when the process monitor has stopped (and stopped every node)
@@ -126,8 +118,12 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f'cnr_launch: {exc}', file=sys.stderr)
         parent.shutdown()
         return EXIT_CONFIG
+    # roslaunch owns SIGINT/SIGTERM/SIGHUP (its handler re-installs itself over any other); it records that
+    # one arrived in this flag
+    if getattr(roslaunch.pmon, '_shutting_down', False):
+        return EXIT_INTERRUPTED
     if outcome.done.is_set():
-        if outcome.status not in (0, EXIT_INTERRUPTED):
+        if outcome.status != 0:
             print(f'cnr_launch: {outcome.reason}', file=sys.stderr)
         return int(outcome.status)
     return 0

@@ -25,10 +25,33 @@ def init_node(name: str, **kwargs) -> None:
     slow link), and the simulator, interrupted while publishing under its own lock, needed roslaunch's SIGKILL.
     Here the handler only starts a thread that calls ``rospy.signal_shutdown``, so every node stops on
     SIGINT within a loop period (tests/test_launch_lifecycle.py).
+
+    While that shutdown closes the node's topics, any thread (a loop, a ``rospy.Timer``) may be in the middle
+    of a ``publish()`` or a ``rospy.sleep()`` and get ``ROSException``/``ROSInterruptException``: expected,
+    not an error. Such an exception, raised once the shutdown has begun, ends its thread quietly instead of
+    printing a traceback; every other exception is reported as before.
     """
     import signal
+    import sys
     import threading
     rospy.init_node(name, disable_signals=True, **kwargs)
+
+    def expected_at_shutdown(exc_type) -> bool:
+        return (exc_type is not None and issubclass(exc_type, rospy.ROSException)
+                and rospy.core.is_shutdown_requested())
+
+    default_thread_hook, default_hook = threading.excepthook, sys.excepthook
+
+    def thread_hook(args) -> None:
+        if not expected_at_shutdown(args.exc_type):
+            default_thread_hook(args)
+
+    def main_hook(exc_type, exc, tb) -> None:
+        if not expected_at_shutdown(exc_type):
+            default_hook(exc_type, exc, tb)
+
+    threading.excepthook = thread_hook
+    sys.excepthook = main_hook
 
     def handler(signum, _frame) -> None:
         threading.Thread(target=rospy.signal_shutdown, args=(f'signal {signum}',), daemon=True).start()

@@ -280,7 +280,7 @@ class SimulatorNode:
         while not rospy.is_shutdown():
             with self.lock:
                 event = self.world.step()
-                self.publish(event)
+                self.publish(event)     # at shutdown, may raise on a closed topic: see cnr_params.ros.init_node
                 sim = self.world.time
             if rtf > 0:
                 target = wall0 + (sim - sim0) / rtf
