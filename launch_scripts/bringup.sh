@@ -41,7 +41,8 @@ cnr_source_ws
 cnr_master_uri "$host" "$port"
 cnr_ensure_master
 cnr_log "bringing up the TurtleBot on $ROS_MASTER_URI (map $map_file, real-time factor $rtf)"
-cnr_spawn roslaunch --wait cnr_bringup robot.launch map:="$map_file" real_time_factor:="$rtf" \
+# cnr_launch: roslaunch that stops at once with exit 2 when a node reports a configuration error
+cnr_spawn rosrun cnr_bringup cnr_launch cnr_bringup robot.launch map:="$map_file" real_time_factor:="$rtf" \
   x:="$x" y:="$y" a:="$yaw" obstacles:="$obstacles" navigation:="$nav" \
   ${rate:+controller_frequency:="$rate"} "${extra[@]}"
 wait "${CNR_PIDS[-1]}"
