@@ -253,3 +253,35 @@ def test_report_files(tmp_path):
     render_png(str(tmp_path / 'c.png'), cells, [(0.5, 0.5), (3.5, 0.5)], 3, 'test')
     assert (tmp_path / 'c.png').stat().st_size > 1000
     assert path_length([(0, 0), (3, 4)]) == 5.0
+
+
+# -- mfg's local fallback goals and cnr_params.ros.call_with_timeout ------------------------------------
+def test_local_goals_pick_the_least_recently_measured_cell_not_the_robots():
+    from cnr_maps.grid import MapcellGrid
+    from mfg.core.fallback import LocalGoals
+    grid = MapcellGrid(min_x=0.0, min_y=-1.0, cell_size=1.0, cols=3, rows=1)
+    goals = LocalGoals()
+    assert goals.next_cell(grid, (0.5, -0.5)) == 2          # never-visited first, farthest on a tie
+    goals.visited(2, 10.0)
+    goals.visited(1, 5.0)
+    goals.visited(1, 4.0)                                    # an older time does not move the last visit back
+    assert goals.last_visit[1] == 5.0
+    assert goals.next_cell(grid, (2.5, -0.5)) == 0           # cell 0 never measured
+    goals.visited(0, 20.0)
+    assert goals.next_cell(grid, (2.5, -0.5)) == 1           # the oldest of 0 (20 s) and 1 (5 s); 2 is the robot's
+
+
+def test_call_with_timeout_returns_results_errors_and_gives_up_in_time():
+    import threading
+    import time
+    from cnr_params.ros import call_with_timeout
+    assert call_with_timeout(lambda a, b: a + b, 1.0, 2, 3) == (True, 5)
+    ok, err = call_with_timeout(lambda: 1 / 0, 1.0)
+    assert not ok and isinstance(err, ZeroDivisionError)
+    release = threading.Event()
+    t0 = time.monotonic()
+    ok, err = call_with_timeout(release.wait, 0.2)
+    took = time.monotonic() - t0
+    release.set()
+    assert not ok and isinstance(err, TimeoutError)
+    assert took < 5.0                                        # gave up instead of waiting for the call

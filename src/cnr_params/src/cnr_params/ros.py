@@ -58,3 +58,33 @@ def init_node(name: str, **kwargs) -> None:
 
     signal.signal(signal.SIGINT, handler)
     signal.signal(signal.SIGTERM, handler)
+
+
+def call_with_timeout(func, timeout: float, *args, **kwargs):
+    """Call ``func(*args, **kwargs)`` (e.g. a ``rospy.ServiceProxy`` to a module on another host), giving up
+    after ``timeout`` wall seconds: the robot never waits on the cloud.
+
+    rospy's service calls have no timeout of their own (a connection to an unreachable host can block for
+    minutes), so the call runs in a daemon thread; a call that overruns is abandoned, not interrupted (its
+    thread ends when rospy gives up on the connection).
+
+    Returns:
+        ``(True, result)``, or ``(False, exception)`` for an exception or ``TimeoutError`` on a timeout.
+    """
+    import threading
+    box: dict = {}
+
+    def run() -> None:
+        try:
+            box['result'] = func(*args, **kwargs)
+        except Exception as exc:          # reported to the caller, who decides
+            box['error'] = exc
+
+    worker = threading.Thread(target=run, name='call_with_timeout', daemon=True)
+    worker.start()
+    worker.join(timeout)
+    if worker.is_alive():
+        return False, TimeoutError(f'no answer within {timeout:g} s')
+    if 'error' in box:
+        return False, box['error']
+    return True, box['result']

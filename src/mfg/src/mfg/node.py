@@ -23,8 +23,9 @@ from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, SearchState
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.pose import yaw_to_quaternion
 from cnr_msgs.srv import NextGoal
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import call_with_timeout, init_node, private_section
 from mfg.core.detector import Detector
+from mfg.core.fallback import LocalGoals
 from mfg.core.params import MfgParams, read_params
 from mfg.core.search import HotspotSearch
 
@@ -43,6 +44,9 @@ class MfgNode:
         self.state = SearchState(mode='IDLE', goal_cell=-1, investigation_cell=-1, investigation_mean=math.nan,
                                  last_temperature=math.nan, last_cell=-1)
         self.client = actionlib.SimpleActionClient('move_base', MoveBaseAction)
+        self.next_goal = rospy.ServiceProxy(p.next_goal_service, NextGoal)     # one proxy for every goal
+        self.local_goals = LocalGoals()
+        self.goal_manager_reachable = True
         self.state_pub = rospy.Publisher('~state', SearchState, queue_size=10, latch=True)
         self.hotspot_pub = rospy.Publisher('hotspot', Hotspot, queue_size=1, latch=True)
         rospy.Subscriber('cell_states', CellStates, self._on_cells, queue_size=1)
@@ -65,6 +69,7 @@ class MfgNode:
         with self.lock:
             self.state.last_temperature, self.state.last_cell = msg.temperature, cell
             self.measurements.append((t, cell, msg.temperature))
+            self.local_goals.visited(cell, t)
             if not self.cell_trail or self.cell_trail[-1] != cell:
                 self.cell_trail.append(cell)
             abnormal = self.detector.observe(msg.temperature)
@@ -128,25 +133,51 @@ class MfgNode:
         return c.center_x, c.center_y
 
     # -- behaviours ----------------------------------------------------------------------------
-    def patrol_once(self) -> None:
-        rospy.wait_for_service(self.p.next_goal_service)
-        x, y = self.pose if self.pose else (0.0, 0.0)
+    def _global_goal(self, x: float, y: float) -> Tuple[Optional[Tuple[int, int, int, float, float]], str]:
+        """Next global goal (index, col, row, x, y) and the policy that chose it.
+
+        Asks the global goal manager with a timeout (it may run on the cloud); if it does not answer, the
+        robot's own least-recently-visited goal (logged once per outage). The robot never waits on the cloud.
+        """
+        timeout = self.p.next_goal_timeout
+        problem = ''
         try:
-            res = rospy.ServiceProxy(self.p.next_goal_service, NextGoal)(x, y)
-        except rospy.ServiceException as exc:
-            rospy.logwarn_throttle(10.0, f'global goal manager unavailable: {exc}')
+            rospy.wait_for_service(self.p.next_goal_service, timeout)
+            ok, res = call_with_timeout(self.next_goal, timeout, x, y)
+            if not ok:
+                problem = str(res)
+            elif not res.success:
+                problem = res.message
+        except rospy.ROSException as exc:          # not registered within the timeout
+            problem = str(exc)
+        if not problem:
+            if not self.goal_manager_reachable:
+                rospy.loginfo('global goal manager answers again: back to its goals')
+                self.goal_manager_reachable = True
+            c = res.cell
+            return (c.index, c.col, c.row, c.center_x, c.center_y), res.policy
+        if self.goal_manager_reachable:
+            rospy.logwarn(f'global goal manager unavailable ({problem}): patrolling with the robot\'s own '
+                          f'least-recently-visited goals until it answers again')
+            self.goal_manager_reachable = False
+        index = self.local_goals.next_cell(self.grid, (x, y))
+        if index is None:
+            return None, LocalGoals.name
+        c = self.grid.cell(index)
+        return (c.index, c.col, c.row, c.center_x, c.center_y), LocalGoals.name
+
+    def patrol_once(self) -> None:
+        x, y = self.pose if self.pose else (0.0, 0.0)
+        goal, policy = self._global_goal(x, y)
+        if goal is None:
             rospy.sleep(1.0)
             return
-        if not res.success:
-            rospy.logwarn_throttle(10.0, f'no global goal: {res.message}')
-            rospy.sleep(1.0)
-            return
-        cell = res.cell
-        self.publish_state('PATROL', f'global goal: cell {cell.index} (col {cell.col}, row {cell.row}) at '
-                                     f'({cell.center_x:.1f}, {cell.center_y:.1f}) [{res.policy}]', goal_cell=cell.index)
-        outcome = self.drive(cell.center_x, cell.center_y, interruptible=True)
+        index, col, row, gx, gy = goal
+        self.publish_state('PATROL', f'global goal: cell {index} (col {col}, row {row}) at ({gx:.1f}, {gy:.1f}) '
+                                     f'[{policy}]', goal_cell=index)
+        outcome = self.drive(gx, gy, interruptible=True)
         if outcome == 'failed' and not rospy.is_shutdown():     # a goal cancelled by our own shutdown is no news
-            rospy.logwarn(f'global goal cell {cell.index} not reached')
+            rospy.logwarn(f'global goal cell {index} not reached')
 
     def search(self) -> None:
         t0, cell, temp = self.trigger

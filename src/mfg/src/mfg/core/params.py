@@ -21,6 +21,7 @@ class MfgParams:
     measure_timeout: float       # s
     goal_timeout: float          # s
     next_goal_service: str
+    next_goal_timeout: float     # wall s to wait for the global goal manager before the robot's own goal
     pose_topic: str
     suppress_radius: int         # cells
     frame_id: str
@@ -38,6 +39,7 @@ def read_params(p: Section) -> MfgParams:
                      measure_timeout=m.number('measure_timeout', positive=True),
                      goal_timeout=m.number('goal_timeout', positive=True),
                      next_goal_service=m.string('next_goal_service'),
+                     next_goal_timeout=m.number('next_goal_timeout', positive=True),
                      pose_topic=m.string('pose_topic'),
                      suppress_radius=m.integer('suppress_radius', minimum=0),
                      frame_id=m.string('frame_id'))
