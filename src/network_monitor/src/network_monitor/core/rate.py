@@ -2,7 +2,7 @@
 
 :class:`RateSampler` is fed cumulative (rx, tx) byte counters with their sample times, from any reader
 (``psutil.net_io_counters(pernic=True)`` in the node, a fake in tests). Every pair of consecutive samples
-at least ``min_window`` apart gives one window rate in bit/s (rx + tx: a Wi-Fi link is one shared medium,
+about ``min_window`` or more apart gives one window rate in bit/s (rx + tx: a Wi-Fi link is one shared medium,
 and ifstat reports both directions). A counter that goes backwards (interface reset, wrap) or a missing
 interface restarts the baseline; :meth:`gap` does the same on purpose, e.g. so an active probe's own traffic
 is never counted as the robot's usage.
@@ -36,11 +36,14 @@ def psutil_reader(psutil_module) -> CounterReader:
     return read
 
 
+JITTER = 0.9   # a window may be this fraction of min_window short (sampling timer jitter)
+
+
 class RateSampler:
     """Window rates of one interface's byte counters.
 
     Args:
-        min_window: shortest window in seconds (0.1 s like ifstat); closer samples are merged into the next.
+        min_window: shortest window in seconds (0.1 s like ifstat); closer samples (below 0.9 of it, for timer jitter) are merged into the next.
         history: seconds of window rates kept for :meth:`mean` and :meth:`peak`.
     """
 
@@ -66,7 +69,7 @@ class RateSampler:
             self._base = (now, total)
             return None
         dt = now - self._base[0]
-        if dt < self.min_window:
+        if dt < JITTER * self.min_window:
             return None
         rate = 8.0 * (total - self._base[1]) / dt
         self._base = (now, total)
