@@ -6,7 +6,6 @@ monotonic clock (not ROS time, which may be simulated), and nothing waits on the
 from __future__ import annotations
 
 import ipaddress
-import math
 import os
 import socket
 import subprocess
