@@ -23,7 +23,8 @@ import sys
 import threading
 from typing import List, Optional
 
-EXIT_CONFIG = 2          # cnr_params.EXIT_CONFIG (a node's one-line configuration error)
+from cnr_params.config import EXIT_CONFIG   # a node's one-line configuration error
+
 EXIT_INTERRUPTED = 130
 
 
@@ -46,7 +47,7 @@ def _base_name(process_name: str) -> str:
     return process_name.rsplit('-', 1)[0].rsplit('/', 1)[-1]
 
 
-def _make_listener(outcome: _Outcome, until: Optional[str], get_pm):
+def _make_listener(outcome: _Outcome, until: Optional[str], pm):
     from roslaunch.pmon import ProcessListener
 
     class Listener(ProcessListener):
@@ -60,9 +61,7 @@ def _make_listener(outcome: _Outcome, until: Optional[str], get_pm):
                 outcome.finish(exit_code or 0, f'{until} finished (exit status {exit_code or 0})')
             else:
                 return
-            pm = get_pm()
-            if pm is not None:
-                pm.shutdown()
+            pm.shutdown()
 
     return Listener()
 
@@ -97,15 +96,13 @@ def main(argv: Optional[List[str]] = None) -> int:
         return EXIT_CONFIG
 
     outcome = _Outcome()
-    holder: dict = {}
 
     class Parent(roslaunch.parent.ROSLaunchParent):
         def _start_pm(self) -> None:
             super()._start_pm()
-            holder['pm'] = self.pm
             # added before any node starts, so no exit goes unseen (ROSLaunchParent adds its listeners
             # only after launching every node)
-            self.pm.add_process_listener(_make_listener(outcome, args.until, lambda: holder.get('pm')))
+            self.pm.add_process_listener(_make_listener(outcome, args.until, self.pm))
 
     uuid = roslaunch.rlutil.get_or_generate_uuid(None, False)
     roslaunch.configure_logging(uuid)
