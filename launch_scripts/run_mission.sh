@@ -3,6 +3,8 @@
 #
 #   launch_scripts/run_mission.sh [--scenario corridor|datacenter|FILE.yaml] [--port P] [--rtf FACTOR]
 #                                 [--report-dir DIR]
+#   launch_scripts/run_mission.sh --two-host [--placement NAME|FILE] [--scenario ...] [--port P] [--report-dir DIR]
+#                                 [--delay MS] [--rate MBIT] [--loss PCT] [--trace FILE] [--link-map FILE]
 #
 # Sets up the workspace, starts a master (default port 11311, or --port, or ROS_MASTER_URI), brings up the
 # simulated TurtleBot with the monitoring modules (kestrel_driver, merger, local_mapcell_manager,
@@ -10,14 +12,28 @@
 # time). Writes a report folder (default reports/<scenario>-<date>): mapcells.png, measurements.tsv,
 # summary.json. Exit status 0 when the hotspot was found. Ctrl-C stops everything it started.
 #   --rtf 1 real time (default 5: five times faster than real time), 0 = as fast as possible.
+#
+# Two hosts (root): --two-host runs the mission on the testbed (launch_scripts/testbed.sh; brought up and
+# down unless one is up): a master, bridge and network_monitor on the robot and on the cloud, the modules on
+# their hosts by --placement (config/placements.yaml: all_robot, move_base_cloud, paper_normal,
+# paper_network_aware, monitoring_cloud; or a YAML file {module: host}; default move_base_cloud), the robot's
+# computer inside its CPU cgroup (config/testbed.yaml robot_cpu). The link: --delay (one-way, ms, each
+# direction), --rate (Mbit/s), --loss (%), or --trace FILE (testbed.sh trace) or --link-map FILE (conditions
+# by robot position, testbed.sh follow, e.g. config/link_map_corridor.yaml). Two-host runs are real-time
+# (the emulator's delays are wall-clock time). The report adds the placement, link.tsv (conditions and
+# bytes over time) and the bytes over the link.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
-port=""; scenario="corridor"; rtf="5"; report=""
+port=""; scenario="corridor"; rtf="5"; report=""; two_host=""; placement="move_base_cloud"; link_args=(); rtf_given=""
 while [ $# -gt 0 ]; do
   case "$1" in
+    --two-host) two_host=1; shift ;;
+    --placement) placement="${2:?}"; two_host=1; shift 2 ;;
+    --delay|--rate|--loss) link_args+=("$1" "${2:?}"); shift 2 ;;
+    --trace|--link-map) link_args+=("$1" "$(realpath -m "${2:?}")"); shift 2 ;;
     --scenario) scenario="${2:?}"; shift 2 ;;
     --port) port="${2:?}"; shift 2 ;;
-    --rtf) rtf="${2:?}"; shift 2 ;;
+    --rtf) rtf="${2:?}"; rtf_given=1; shift 2 ;;
     --report-dir) report="$(realpath -m "${2:?}")"; shift 2 ;;
     -h|--help) cnr_help; exit 0 ;;
     *) cnr_die "unknown argument '$1' (see --help)" ;;
@@ -35,6 +51,18 @@ cnr_source_ws
 read -r name map x y a < <(rosrun cnr_mission check_scenario "$scenario_file") || exit 2
 [ -n "$report" ] || report="$CNR_WS/reports/$name-$(date +%Y%m%d-%H%M%S)"
 mkdir -p "$report"
+if [ -n "$two_host" ]; then
+  case "$placement" in *.yaml|*.yml|*/*) placement="$(realpath -m "$placement")" ;; esac
+  [ -z "$rtf_given" ] || [ "$rtf" = 1 ] || cnr_die "--two-host runs in real time (the link emulator's delays and rates are wall-clock time, the robot's CPU cap is per wall second): --rtf 1 or leave it out"
+  [ "$(id -u)" = 0 ] || cnr_die "--two-host needs root (network namespaces, TUN devices, cgroups)"
+  cnr_log "scenario $name ($scenario_file) on two hosts, placement $placement, report in $report"
+  set +e
+  rosrun cnr_mission two_host_mission --config-dir "$CNR_WS/config" --scenario "$scenario_file" --map "$map" \
+    --start "$x" "$y" "$a" --placement "$placement" --report-dir "$report" --port "${port:-11311}" "${link_args[@]}"
+  status=$?
+  set -e
+else
+[ "${#link_args[@]}" = 0 ] || cnr_die "--delay/--rate/--loss/--trace/--link-map need --two-host"
 cnr_master_uri "" "$port"
 cnr_master_up && cnr_die "a master already runs at $ROS_MASTER_URI; stop it or choose --port"
 cnr_ensure_master
@@ -48,6 +76,7 @@ rosrun cnr_bringup cnr_launch --until mission_monitor cnr_mission mission.launch
   | grep --line-buffered -v -e '^ \* /' -e '^\s*$' -e 'rosdep view is empty'
 status=${PIPESTATUS[0]}
 set -e
+fi
 [ "$status" = 2 ] && { cnr_log "stopped: a node reported a configuration error (above)"; exit 2; }
 [ "$status" = 130 ] && { cnr_log "interrupted"; exit 130; }
 found=$(/usr/bin/python3 -c "import json,sys; print(json.load(open(sys.argv[1])).get('found'))" "$report/summary.json" 2>/dev/null || echo missing)

@@ -40,6 +40,7 @@ class MissionMonitor:
         self.map_file = p.file_path('map_file')
         self.sources = [(s.name, s.x, s.y) for s in TemperatureField.from_section(p.section('temperature_field')).sources]
         self.rtf = p.number('real_time_factor', nonnegative=True)
+        self.placement = p.string('placement')
         self.lock = threading.Lock()
         self.trajectory: List[Tuple[float, float]] = []
         self.battery_first: Optional[BatteryState] = None
@@ -130,7 +131,7 @@ class MissionMonitor:
         b0, b1 = self.battery_first, self.battery_last
         now = rospy.Time.now().to_sec()
         summary = dict(
-            scenario=self.name, found=found,
+            scenario=self.name, placement=self.placement, found=found,
             hotspot=None if h is None else dict(cell=h.cell_index, row=h.row, col=h.col, x=h.x, y=h.y,
                                                 temperature=h.temperature, search_duration=h.search_duration,
                                                 cells_checked=h.cells_checked),

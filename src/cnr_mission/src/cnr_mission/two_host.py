@@ -1,0 +1,318 @@
+"""The mission across two masters on the testbed: robot and cloud, each with its master, bridge and modules.
+
+``run_mission.sh --two-host`` calls this (root: network namespaces, TUN devices, cgroups)::
+
+    rosrun cnr_mission two_host_mission --scenario FILE --placement NAME|FILE --report-dir DIR
+        [--delay MS --rate MBIT --loss PCT | --trace FILE | --link-map FILE] [--port P]
+
+What runs where:
+
+* **robot namespace, outside the CPU cap** (the physical world and the observer): the simulator with its
+  battery and map_server, the mission monitor (``world.launch``), the link-map follower or trace player;
+* **robot namespace, inside the robot's CPU cgroup** (the robot's computer): the robot's rosmaster, its
+  bridge, network_monitor, kestrel_driver and the modules the placement puts on the robot (``host.launch``);
+* **cloud namespace**: the cloud's rosmaster, bridge, network_monitor and the modules placed on the cloud (with
+  a map_server of its own when move_base runs there).
+
+The bridges' allow-lists follow from the placement (``cnr_bringup.placement``). Time: the emulator works in
+wall-clock time and two-host runs are real-time runs (real-time factor 1): a delay or rate set on the link is
+then the one the nodes see in sim time, and the robot's CPU cap means what it says. The achieved factor
+(sim / wall) is in the report (``real_time_factor_achieved``).
+
+Exit status: 0 hotspot found, 3 not found, 2 bad configuration, 130 interrupted, 1 anything else.
+"""
+from __future__ import annotations
+
+import argparse
+import base64
+import json
+import os
+import re
+import signal
+import sys
+import time
+import uuid
+from typing import Dict, List, Optional
+
+import yaml
+
+from cnr_bringup.placement import Placement, launch_args, load_catalog, describe
+from cnr_harness import Proc
+from cnr_params.config import EXIT_CONFIG, ConfigError, load_yaml
+from cnr_testbed.api import Testbed, TestbedError
+from cnr_testbed.rosside import BRIDGE_PORT, RosSide
+
+EXIT_INTERRUPTED = 130
+EXIT_NOT_FOUND = 3
+# roslaunch's lines that say nothing to a person watching a mission (as run_mission.sh filters them)
+_NOISE = re.compile(r'^( \* /|\s*$|.*rosdep view is empty)')
+
+
+class Stop(Exception):
+    """A signal asked the mission to stop."""
+
+
+def _on_signal(signum, _frame) -> None:
+    raise Stop()
+
+
+class TwoHostMission:
+    """Brings up the testbed, the two masters and the three launches; waits for the mission monitor."""
+
+    def __init__(self, ws_config: str, scenario_file: str, map_file: str, start: List[str], placement: Placement,
+                 report_dir: str, port: int, link: Dict[str, float], trace: Optional[str],
+                 link_map: Optional[str]) -> None:
+        self.config = ws_config
+        self.scenario_file, self.map_file, self.start = scenario_file, map_file, start
+        self.placement = placement
+        self.report_dir = report_dir
+        self.log_dir = os.path.join(report_dir, 'logs')
+        self.port = port
+        self.link, self.trace, self.link_map = link, trace, link_map
+        self.testbed = Testbed(os.path.join(ws_config, 'testbed.yaml'))
+        self.owns_testbed = False
+        self.robot: Optional[RosSide] = None
+        self.cloud: Optional[RosSide] = None
+        self.procs: Dict[str, Proc] = {}
+        self.counters0: Optional[Dict] = None
+        self.link_log: List[Dict] = []
+
+    # -- files each host's launch reads -------------------------------------------------------------------
+    def _write_yaml(self, name: str, data: Dict) -> str:
+        path = os.path.join(self.log_dir, name)
+        with open(path, 'w') as f:
+            yaml.safe_dump(data, f, default_flow_style=None, sort_keys=False)
+        return path
+
+    def _secret(self) -> str:
+        path = os.path.join(self.log_dir, 'bridge.secret')
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+        with os.fdopen(fd, 'w') as f:
+            f.write(base64.b64encode(os.urandom(32)).decode() + '\n')
+        return path
+
+    def _bridge_config(self, side: RosSide, peer: RosSide) -> str:
+        """The host's bridge file from config/ with this testbed's addresses and the placement's allow-lists."""
+        host_file = os.path.join(self.config, f'bridge_{side.side}.yaml')
+        cfg = load_yaml(host_file)
+        cfg.update(name=side.side, listen=f'{side.address}:{BRIDGE_PORT}',
+                   peers=[dict(name=peer.side, address=f'{peer.address}:{BRIDGE_PORT}')],
+                   allow_topics=self.placement.allow('topics'), allow_services=self.placement.allow('services'))
+        return self._write_yaml(f'bridge_{side.side}.yaml', cfg)
+
+    def _monitor_overlay(self, side: RosSide, peer: RosSide) -> str:
+        return self._write_yaml(f'network_monitor_{side.side}.yaml',
+                                dict(name=side.side, peer=peer.side, peer_address=peer.address))
+
+    def _battery_overlay(self) -> str:
+        """The battery charges the robot's link interface (the testbed's robot-side device)."""
+        return self._write_yaml('battery_robot.yaml', dict(battery=dict(interface=self.testbed.cfg.robot_dev)))
+
+    # -- processes -------------------------------------------------------------------------------------
+    def _launch(self, side: RosSide, name: str, args: List[str], until: Optional[str] = None,
+                prefix: Optional[List[str]] = None) -> Proc:
+        argv = list(prefix or []) + ['rosrun', 'cnr_bringup', 'cnr_launch']
+        if until:
+            argv += ['--until', until]
+        proc = side.run(argv + args, name)
+        self.procs[name] = proc
+        return proc
+
+    def up(self) -> None:
+        os.makedirs(self.log_dir, exist_ok=True)
+        if self.testbed.running():
+            print(f'[two-host] using the running testbed {self.testbed.cfg.name!r}', flush=True)
+        else:
+            self.testbed.up()
+            self.owns_testbed = True
+            print(f'[two-host] testbed {self.testbed.cfg.name!r} up: robot {self.testbed.robot_address}, '
+                  f'cloud {self.testbed.cloud_address}', flush=True)
+        if self.link:
+            self.testbed.set('both', **self.link)
+        self.counters0 = self.testbed.status()
+        self.robot = RosSide(self.testbed, 'robot', port=self.port, log_dir=self.log_dir)
+        self.cloud = RosSide(self.testbed, 'cloud', port=self.port, log_dir=self.log_dir)
+        self.robot.start_master(use_sim_time=True)
+        self.cloud.start_master(use_sim_time=True)
+        for side in (self.robot, self.cloud):
+            # one run id per master, set before its launches start (roslaunch reads it from the master and
+            # refuses a second launch whose own id differs)
+            side.call('setParam', '/run_id', str(uuid.uuid1()))
+        secret = self._secret()
+        x, y, a = self.start
+        common = [f'scenario_file:={self.scenario_file}', f'map:={self.map_file}',
+                  f'store:={os.path.join(self.report_dir, "store.tsv")}']
+        self._launch(self.robot, 'world', ['cnr_mission', 'world.launch', f'scenario_file:={self.scenario_file}',
+                                           f'map:={self.map_file}', f'x:={x}', f'y:={y}', f'a:={a}',
+                                           'real_time_factor:=1', f'report_dir:={self.report_dir}',
+                                           f'placement:={self.placement.name}',
+                                           f'battery_overlay:={self._battery_overlay()}'], until='mission_monitor')
+        for side, peer in ((self.robot, self.cloud), (self.cloud, self.robot)):
+            host_args = ['cnr_mission', 'host.launch', f'host:={side.side}', *common,
+                         f'bridge_config:={self._bridge_config(side, peer)}', f'secret_file:={secret}',
+                         f'network_monitor_overlay:={self._monitor_overlay(side, peer)}',
+                         *launch_args(self.placement, side.side)]
+            if side.side == 'robot':
+                host_args.append('kestrel_driver:=true')
+            elif self.placement.host('move_base') == 'cloud':
+                host_args.append('map_server:=true')
+            self._launch(side, f'host_{side.side}', host_args)
+        tb_cli = [sys.executable, '-m', 'cnr_testbed.cli', '--config', self.testbed.config_path]
+        if self.trace:
+            self.procs['trace'] = self.robot.run(tb_cli + ['trace', self.trace], 'trace')
+        if self.link_map:
+            self.procs['follow'] = self.robot.run(tb_cli + ['follow', '--map', self.link_map], 'follow')
+
+    def watch(self) -> int:
+        """Print the world launch's output until the mission monitor ends; the exit status."""
+        world = self.procs['world']
+        offset = 0
+        status: Optional[int] = None
+        while status is None:
+            time.sleep(0.2)
+            offset = self._echo(world.log_path, offset)
+            status = world.poll()
+            for name, proc in self.procs.items():
+                rc = proc.poll()
+                if name != 'world' and rc is not None and status is None:
+                    print(f'[two-host] {name} ended with status {rc} (log: {proc.log_path})', flush=True)
+                    status = EXIT_CONFIG if rc == EXIT_CONFIG else 1
+            self._sample_link()
+        self._echo(world.log_path, offset)
+        return status
+
+    def _sample_link(self) -> None:
+        if not self.link_log or time.monotonic() - self.link_log[-1]['t_mono'] >= 1.0:
+            try:
+                st = self.testbed.status()
+            except OSError:
+                return
+            self.link_log.append(dict(t_mono=time.monotonic(), up=st['up'], down=st['down']))
+
+    @staticmethod
+    def _echo(path: str, offset: int) -> int:
+        try:
+            with open(path, 'rb') as f:
+                f.seek(offset)
+                data = f.read()
+        except FileNotFoundError:
+            return offset
+        end = data.rfind(b'\n') + 1
+        for line in data[:end].decode(errors='replace').splitlines():
+            if not _NOISE.match(line):
+                print(line, flush=True)
+        return offset + end
+
+    def down(self) -> None:
+        for name in list(self.procs)[::-1]:
+            self.procs[name].stop()
+        for side in (self.cloud, self.robot):
+            if side is not None:
+                side.stop()
+        if self.owns_testbed:
+            self.testbed.down()
+
+    def link_report(self) -> Dict:
+        """Link conditions over time and bytes carried, from the emulator's counters."""
+        rows = []
+        t0 = self.link_log[0]['t_mono'] if self.link_log else 0.0
+        for s in self.link_log:
+            rows.append(dict(t=round(s['t_mono'] - t0, 2),
+                             **{f'{d}_{k}': s[d]['conditions'][k] for d in ('up', 'down')
+                                for k in ('delay', 'rate', 'loss', 'outage')},
+                             up_bytes=s['up']['counters']['bytes_delivered'],
+                             down_bytes=s['down']['counters']['bytes_delivered']))
+        path = os.path.join(self.report_dir, 'link.tsv')
+        if rows:
+            with open(path, 'w') as f:
+                f.write('\t'.join(rows[0]) + '\n')
+                for r in rows:
+                    f.write('\t'.join(str(v) for v in r.values()) + '\n')
+        first, last = (self.link_log[0], self.link_log[-1]) if self.link_log else (None, None)
+        carried = {d: (last[d]['counters']['bytes_delivered'] - first[d]['counters']['bytes_delivered'])
+                   if first else None for d in ('up', 'down')}
+        return dict(bytes_up=carried['up'], bytes_down=carried['down'], link_tsv='link.tsv' if rows else None,
+                    changes=sum(1 for a, b in zip(self.link_log, self.link_log[1:])
+                                if a['up']['conditions'] != b['up']['conditions']))
+
+
+def amend_summary(report_dir: str, extra: Dict) -> None:
+    """Add the two-host section to the monitor's summary.json (rewritten atomically)."""
+    path = os.path.join(report_dir, 'summary.json')
+    try:
+        with open(path) as f:
+            summary = json.load(f)
+    except (OSError, ValueError):
+        return
+    summary.update(extra)
+    tmp = path + '.tmp'
+    with open(tmp, 'w') as f:
+        json.dump(summary, f, indent=1)
+    os.replace(tmp, path)
+
+
+def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(prog='two_host_mission', description=__doc__.split('\n')[0])
+    ap.add_argument('--config-dir', required=True, help='the workspace config/ folder')
+    ap.add_argument('--scenario', required=True, help='scenario YAML')
+    ap.add_argument('--map', required=True, help='map YAML (checked by check_scenario)')
+    ap.add_argument('--start', nargs=3, required=True, metavar=('X', 'Y', 'YAW'))
+    ap.add_argument('--placement', required=True, help='a name in config/placements.yaml or a YAML file')
+    ap.add_argument('--report-dir', required=True)
+    ap.add_argument('--port', type=int, required=True, help='master port in both namespaces')
+    ap.add_argument('--delay', type=float, help='one-way delay per direction [ms]')
+    ap.add_argument('--rate', type=float, help='rate per direction [Mbit/s], 0 = unlimited')
+    ap.add_argument('--loss', type=float, help='loss per direction [%%]')
+    ap.add_argument('--trace', help='link trace (TSV, testbed.sh trace) played from the start')
+    ap.add_argument('--link-map', help='link-quality map by robot position (testbed.sh follow)')
+    return ap.parse_args(argv)
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    args = parse_args(argv)
+    try:
+        placement = load_catalog(os.path.join(args.config_dir, 'placements.yaml')).placement(args.placement)
+    except ConfigError as exc:
+        print(f'two_host_mission: {exc}', file=sys.stderr)
+        return EXIT_CONFIG
+    link = {k: v for k, v in (('delay', args.delay), ('rate', args.rate)) if v is not None}
+    if args.loss is not None:
+        if not 0 <= args.loss <= 100:
+            print(f'two_host_mission: --loss must be 0..100 %, got {args.loss}', file=sys.stderr)
+            return EXIT_CONFIG
+        link['loss'] = args.loss / 100.0
+    if os.geteuid() != 0:
+        print('two_host_mission: the two-host mission needs root (network namespaces, TUN devices, cgroups)',
+              file=sys.stderr)
+        return EXIT_CONFIG
+    print(describe(placement), flush=True)
+    mission = TwoHostMission(args.config_dir, args.scenario, args.map, args.start, placement, args.report_dir,
+                             args.port, link, args.trace, args.link_map)
+    signal.signal(signal.SIGINT, _on_signal)
+    signal.signal(signal.SIGTERM, _on_signal)
+    status = 1
+    wall0 = time.monotonic()
+    try:
+        mission.up()
+        status = mission.watch()
+    except Stop:
+        status = EXIT_INTERRUPTED
+    except (TestbedError, ConfigError) as exc:
+        print(f'two_host_mission: {exc}', file=sys.stderr)
+        status = EXIT_CONFIG if isinstance(exc, ConfigError) else 1
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        try:
+            mission.down()
+        finally:
+            signal.signal(signal.SIGINT, signal.SIG_DFL)
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    if status in (0, EXIT_NOT_FOUND):
+        amend_summary(args.report_dir, dict(
+            two_host=dict(placement=placement.name, hosts=placement.as_dict(),
+                          bridged_topics=placement.allow('topics'), bridged_services=placement.allow('services'),
+                          relayed=[s.topic for s in placement.relayed()],
+                          link_set=dict(link, trace=args.trace, link_map=args.link_map),
+                          wall_time_total=time.monotonic() - wall0, **mission.link_report())))
+    return status
