@@ -23,7 +23,7 @@ from cnr_maps.mapio import load_map
 from cnr_maps.measurements import Measurement, write_tsv
 from cnr_mission.core.report import CellSummary, path_length, render_png, write_summary
 from cnr_mission.core.scenario import read_mission
-from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, SearchState
+from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, MfgActivity, SearchState
 from cnr_msgs.srv import GetMeasurements
 from cnr_params import ConfigError
 from cnr_params.ros import init_node, private_section
@@ -49,6 +49,7 @@ class MissionMonitor:
         self.hotspot: Optional[Hotspot] = None
         self.measurements = 0
         self.last_state = ''
+        self.activity: Optional[MfgActivity] = None
         self.start_sim: Optional[float] = None
         self.wall0 = time.monotonic()
         rospy.Subscriber('base_pose_ground_truth', Odometry, self._on_pose, queue_size=10)
@@ -57,6 +58,7 @@ class MissionMonitor:
         rospy.Subscriber('hotspot', Hotspot, self._on_hotspot, queue_size=1)
         rospy.Subscriber('merged_measurements', MergedMeasurement, self._on_measurement, queue_size=100)
         rospy.Subscriber('mfg/state', SearchState, self._on_state, queue_size=20)
+        rospy.Subscriber('mfg/activity', MfgActivity, lambda m: setattr(self, 'activity', m), queue_size=1)
 
     def _say(self, text: str) -> None:
         t = rospy.Time.now().to_sec() - (self.start_sim or rospy.Time.now().to_sec())
@@ -142,6 +144,11 @@ class MissionMonitor:
             battery_used_ah=None if b0 is None else b0.charge - b1.charge,
             battery_energy=None if b1 is None else b1.serial_number,
             measurements_taken=len(records) or self.measurements,
+            measurements_to_hotspot=None if h is None else sum(1 for r in records if r.time <= h.header.stamp.to_sec()),
+            mfg_activity=None if self.activity is None else dict(
+                measurements=self.activity.measurements, longest_input_gap=self.activity.longest_input_gap,
+                goal_waits=self.activity.goal_waits, goal_wait_total=self.activity.goal_wait_total,
+                goal_wait_longest=self.activity.goal_wait_longest, longest_idle=self.activity.longest_idle),
             heat_sources=[dict(name=n, x=x, y=y) for n, x, y in self.sources])
         if cells:
             occ = extent = None

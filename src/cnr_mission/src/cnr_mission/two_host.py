@@ -38,6 +38,7 @@ import yaml
 
 from cnr_bringup.placement import Placement, launch_args, load_catalog, describe
 from cnr_harness import Proc
+from cnr_mission.core.report import write_summary
 from cnr_params.config import EXIT_CONFIG, ConfigError, load_yaml
 from cnr_testbed.api import Testbed, TestbedError
 from cnr_testbed.rosside import BRIDGE_PORT, RosSide
@@ -204,8 +205,15 @@ class TwoHostMission:
         return offset + end
 
     def down(self) -> None:
-        for name in list(self.procs)[::-1]:
-            self.procs[name].stop()
+        procs = list(self.procs.values())[::-1]
+        for proc in procs:              # every launch shuts down at the same time, then each is awaited
+            if proc.alive():
+                try:
+                    os.killpg(proc.pid, signal.SIGINT)
+                except ProcessLookupError:
+                    pass
+        for proc in procs:
+            proc.stop()
         for side in (self.cloud, self.robot):
             if side is not None:
                 side.stop()
@@ -245,10 +253,7 @@ def amend_summary(report_dir: str, extra: Dict) -> None:
     except (OSError, ValueError):
         return
     summary.update(extra)
-    tmp = path + '.tmp'
-    with open(tmp, 'w') as f:
-        json.dump(summary, f, indent=1)
-    os.replace(tmp, path)
+    write_summary(path, summary)
 
 
 def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:

@@ -19,11 +19,12 @@ from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
 from nav_msgs.msg import Odometry
 
 import cnr_params
-from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, SearchState
+from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, MfgActivity, SearchState
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.pose import yaw_to_quaternion
 from cnr_msgs.srv import NextGoal
 from cnr_params.ros import call_with_timeout, init_node, private_section
+from mfg.core.activity import ActivityTracker
 from mfg.core.detector import Detector
 from mfg.core.fallback import LocalGoals
 from mfg.core.params import MfgParams, read_params
@@ -49,6 +50,9 @@ class MfgNode:
         self.goal_manager_reachable = True
         self.state_pub = rospy.Publisher('~state', SearchState, queue_size=10, latch=True)
         self.hotspot_pub = rospy.Publisher('hotspot', Hotspot, queue_size=1, latch=True)
+        self.activity = ActivityTracker()
+        self.activity_pub = rospy.Publisher('~activity', MfgActivity, queue_size=1, latch=True)
+        rospy.Timer(rospy.Duration(1.0 / p.activity_rate), self._publish_activity)
         rospy.Subscriber('cell_states', CellStates, self._on_cells, queue_size=1)
         rospy.Subscriber(p.pose_topic, Odometry, self._on_pose, queue_size=1)
         rospy.Subscriber('mapcell_measurements', MergedMeasurement, self._on_measurement, queue_size=100)
@@ -62,6 +66,7 @@ class MfgNode:
         self.pose = (msg.pose.pose.position.x, msg.pose.pose.position.y)
 
     def _on_measurement(self, msg: MergedMeasurement) -> None:
+        self.activity.input(rospy.Time.now().to_sec())       # receipt time: a late delivery is a gap
         if self.grid is None or not 0 <= msg.cell < len(self.grid) or not math.isfinite(msg.temperature):
             return
         cell = msg.cell            # assigned by local_mapcell_manager when it stored the measurement
@@ -76,6 +81,15 @@ class MfgNode:
             suppressed = any(self.grid.chebyshev(cell, h) <= self.p.suppress_radius for h in self.hotspots)
             if abnormal and not suppressed and self.trigger is None and self.state.mode == 'PATROL':
                 self.trigger = (t, cell, msg.temperature)
+
+    def _publish_activity(self, _event) -> None:
+        now = rospy.Time.now()
+        r = self.activity.report(now.to_sec())
+        msg = MfgActivity(measurements=r.measurements, longest_input_gap=r.longest_input_gap,
+                          goal_waits=r.goal_waits, goal_wait_total=r.goal_wait_total,
+                          goal_wait_longest=r.goal_wait_longest, longest_idle=r.longest_idle)
+        msg.header.stamp = now
+        self.activity_pub.publish(msg)
 
     # -- helpers -------------------------------------------------------------------------------
     def publish_state(self, mode: str, message: str, search: Optional[HotspotSearch] = None,
@@ -141,6 +155,7 @@ class MfgNode:
         """
         timeout = self.p.next_goal_timeout
         problem = ''
+        asked = rospy.Time.now().to_sec()
         try:
             rospy.wait_for_service(self.p.next_goal_service, timeout)
             ok, res = call_with_timeout(self.next_goal, timeout, x, y)
@@ -150,6 +165,7 @@ class MfgNode:
                 problem = res.message
         except rospy.ROSException as exc:          # not registered within the timeout
             problem = str(exc)
+        self.activity.waited(rospy.Time.now().to_sec() - asked)
         if not problem:
             if not self.goal_manager_reachable:
                 rospy.loginfo('global goal manager answers again: back to its goals')

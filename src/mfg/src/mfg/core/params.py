@@ -25,6 +25,7 @@ class MfgParams:
     pose_topic: str
     suppress_radius: int         # cells
     frame_id: str
+    activity_rate: float         # Hz, ~activity publication
 
 
 def read_params(p: Section) -> MfgParams:
@@ -42,4 +43,5 @@ def read_params(p: Section) -> MfgParams:
                      next_goal_timeout=m.number('next_goal_timeout', positive=True),
                      pose_topic=m.string('pose_topic'),
                      suppress_radius=m.integer('suppress_radius', minimum=0),
-                     frame_id=m.string('frame_id'))
+                     frame_id=m.string('frame_id'),
+                     activity_rate=m.number('activity_rate', positive=True))
