@@ -285,3 +285,21 @@ def test_call_with_timeout_returns_results_errors_and_gives_up_in_time():
     release.set()
     assert not ok and isinstance(err, TimeoutError)
     assert took < 5.0                                        # gave up instead of waiting for the call
+
+
+# -- mfg activity (the paper's dead-zone idle time) ------------------------------------------------
+def test_activity_tracker_gaps_and_waits():
+    from mfg.core.activity import ActivityTracker
+    a = ActivityTracker()
+    assert a.report(5.0).longest_idle == 0.0          # nothing received yet: no gap to speak of
+    for t in (10.0, 10.33, 10.66):
+        a.input(t)
+    assert a.report(10.7).longest_input_gap == pytest.approx(0.33, abs=1e-9)
+    a.input(14.66)                                     # a 4 s outage
+    a.waited(0.2)
+    a.waited(0.5)
+    r = a.report(14.7)
+    assert r.longest_input_gap == pytest.approx(4.0)
+    assert (r.goal_waits, r.goal_wait_total, r.goal_wait_longest) == (2, pytest.approx(0.7), 0.5)
+    assert r.longest_idle == pytest.approx(4.0)
+    assert a.report(20.66).longest_input_gap == pytest.approx(6.0)      # an open gap counts up to now

@@ -23,7 +23,7 @@ from cnr_maps.mapio import load_map
 from cnr_maps.measurements import Measurement, write_tsv
 from cnr_mission.core.report import CellSummary, path_length, render_png, write_summary
 from cnr_mission.core.scenario import read_mission
-from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, MfgActivity, SearchState
+from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, MfgActivity, NetworkProfile, SearchState
 from cnr_msgs.srv import GetMeasurements
 from cnr_params import ConfigError
 from cnr_params.ros import init_node, private_section
@@ -41,6 +41,8 @@ class MissionMonitor:
         self.sources = [(s.name, s.x, s.y) for s in TemperatureField.from_section(p.section('temperature_field')).sources]
         self.rtf = p.number('real_time_factor', nonnegative=True)
         self.placement = p.string('placement')
+        profile_topic = p.string('network_profile_topic')     # '' on one master: no network to profile
+        self.profiles: List[Tuple[float, ...]] = []
         self.lock = threading.Lock()
         self.trajectory: List[Tuple[float, float]] = []
         self.battery_first: Optional[BatteryState] = None
@@ -59,6 +61,8 @@ class MissionMonitor:
         rospy.Subscriber('merged_measurements', MergedMeasurement, self._on_measurement, queue_size=100)
         rospy.Subscriber('mfg/state', SearchState, self._on_state, queue_size=20)
         rospy.Subscriber('mfg/activity', MfgActivity, lambda m: setattr(self, 'activity', m), queue_size=1)
+        if profile_topic:
+            rospy.Subscriber(profile_topic, NetworkProfile, self._on_profile, queue_size=10)
 
     def _say(self, text: str) -> None:
         t = rospy.Time.now().to_sec() - (self.start_sim or rospy.Time.now().to_sec())
@@ -79,6 +83,12 @@ class MissionMonitor:
         if self.battery_first is None:
             self.battery_first = msg
         self.battery_last = msg
+
+    def _on_profile(self, msg: NetworkProfile) -> None:
+        if self.start_sim is not None:
+            with self.lock:
+                self.profiles.append((msg.header.stamp.to_sec() - self.start_sim, float(msg.alive), msg.rtt,
+                                      msg.rtt_spread, msg.loss, msg.c_bw, msg.a_bw, msg.r_bw))
 
     def _on_measurement(self, msg: MergedMeasurement) -> None:
         self.measurements += 1
@@ -123,6 +133,13 @@ class MissionMonitor:
         except (rospy.ROSException, rospy.ServiceException) as exc:
             rospy.logwarn(f'could not fetch the stored measurements: {exc}')
         write_tsv(os.path.join(self.report_dir, 'measurements.tsv'), records)
+        with self.lock:
+            profiles = list(self.profiles)
+        if profiles:     # the robot's network profile over the mission (network_monitor, thesis Eq. 4-1)
+            with open(os.path.join(self.report_dir, 'network_profile.tsv'), 'w') as f:
+                f.write('time\talive\trtt\trtt_spread\tloss\tc_bw\ta_bw\tr_bw\n')
+                for row in profiles:
+                    f.write('\t'.join(f'{v:.6g}' for v in row) + '\n')
         cells = []
         if self.cells:
             cells = [CellSummary(c.index, c.row, c.col, c.min_x, c.max_x, c.min_y, c.max_y, c.mean_temperature,
@@ -144,6 +161,9 @@ class MissionMonitor:
             battery_used_ah=None if b0 is None else b0.charge - b1.charge,
             battery_energy=None if b1 is None else b1.serial_number,
             measurements_taken=len(records) or self.measurements,
+            network_profile=None if not profiles else dict(
+                file='network_profile.tsv', samples=len(profiles),
+                alive_fraction=sum(r[1] for r in profiles) / len(profiles)),
             measurements_to_hotspot=None if h is None else sum(1 for r in records if r.time <= h.header.stamp.to_sec()),
             mfg_activity=None if self.activity is None else dict(
                 measurements=self.activity.measurements, longest_input_gap=self.activity.longest_input_gap,

@@ -1,0 +1,70 @@
+"""The mission across two masters on the testbed (root): placements, the robot never stalling, store-and-forward.
+
+Each test runs a real-time two-host mission (``rosrun cnr_mission two_host_mission``, as ``run_mission.sh
+--two-host`` does): the testbed's robot and cloud namespaces, a master, bridge and network monitor on each,
+the modules on their hosts by placement. About two minutes each.
+"""
+import json
+import os
+import subprocess
+
+import pytest
+
+from cnr_harness import Proc, wait_until
+
+WS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+LOGS = os.path.join(WS, 'build', 'test_logs')
+pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason='needs root (network namespaces, TUN devices, cgroups)')
+
+
+def scenario_line(name):
+    out = subprocess.run(['rosrun', 'cnr_mission', 'check_scenario', os.path.join(WS, 'config', 'scenarios',
+                                                                                   f'{name}.yaml')],
+                         capture_output=True, text=True, check=True)
+    return out.stdout.split()
+
+
+def two_host(tmp_path, placement, *link, scenario='corridor', timeout=400.0):
+    """Run one two-host mission; returns (exit status, summary dict, report folder, output)."""
+    name, map_file, x, y, a = scenario_line(scenario)
+    report = str(tmp_path / f'{placement}')
+    argv = ['rosrun', 'cnr_mission', 'two_host_mission', '--config-dir', os.path.join(WS, 'config'),
+            '--scenario', os.path.join(WS, 'config', 'scenarios', f'{scenario}.yaml'), '--map', map_file,
+            '--start', x, y, a, '--placement', placement, '--report-dir', report, '--port', '11411', *link]
+    proc = Proc(argv, os.path.join(LOGS, f'two_host_{placement}.log'))
+    try:
+        wait_until(lambda: proc.poll() is not None, timeout, f'the two-host mission ({placement}) to end')
+    finally:
+        proc.stop()
+    assert not os.path.exists('/var/run/netns/robot'), 'the testbed was left up'
+    with open(os.path.join(report, 'summary.json')) as f:
+        summary = json.load(f)
+    return proc.returncode, summary, report, proc.output()
+
+
+def test_move_base_on_the_cloud_finds_the_hotspot(tmp_path):
+    status, s, report, out = two_host(tmp_path, 'move_base_cloud', '--delay', '5')
+    assert status == 0, out[-3000:]
+    assert s['found'] and s['hotspot']['cell'] in (19, 8, 20), s['hotspot']
+    th = s['two_host']
+    assert th['placement'] == 'move_base_cloud' and th['hosts']['move_base'] == 'cloud'
+    assert '/scan' in th['bridged_topics'] and '/merged_measurements' not in th['bridged_topics']
+    # the robot's sensor data crossed to the cloud's move_base: the uplink carried far more than the downlink
+    assert th['bytes_up'] > 2 * th['bytes_down'] > 0
+    assert os.path.exists(os.path.join(report, 'link.tsv'))
+    assert s['network_profile']['samples'] > 10 and s['network_profile']['alive_fraction'] > 0.9
+    assert 'Traceback' not in out
+
+
+def test_robot_does_not_stall_while_the_cloud_is_unreachable(tmp_path):
+    """GG on the cloud, MFG on the robot; the link is cut for 8 s every 25 s: the MFG never waits on the cloud."""
+    status, s, report, out = two_host(tmp_path, 'paper_network_aware', '--trace',
+                                      os.path.join(WS, 'config', 'trace_outages.tsv'))
+    assert status == 0, out[-3000:]
+    assert s['found']
+    act = s['mfg_activity']
+    assert act['goal_waits'] > 0
+    assert act['goal_wait_longest'] < 1.0, act          # next_goal_timeout 0.5 s, then the robot's own goal
+    assert act['longest_input_gap'] < 1.0, act          # its measurements are made on the robot
+    assert s['network_profile']['alive_fraction'] < 0.95    # the outages were seen by the network monitor
+    assert 'local fallback' in out
