@@ -101,6 +101,9 @@ def test_repository_config_and_overrides(workspace):
     lm = load_link_map(f'{workspace}/config/link_map_corridor.yaml')
     assert lm.conditions_at(0.5, 0.0)[0] == 'left_end' and lm.conditions_at(5.0, 0.0)[1].outage
     assert not lm.conditions_at(11.0, 0.0)[1].outage
+    assert lm.direction == 'both'
+    up = load_link_map(f'{workspace}/config/link_map_corridor_uplink.yaml')
+    assert up.direction == 'up' and up.conditions_at(5.0, 0.0)[1].outage
 
 
 def write(tmp_path, name, text):
@@ -137,6 +140,14 @@ def test_trace_parsing_and_errors(tmp_path):
         with pytest.raises(ConfigError) as err:
             load_trace(write(tmp_path, 'bad.tsv', text))
         assert field in str(err.value)
+
+
+def test_link_map_direction_is_required_and_checked(tmp_path):
+    base = {'default': IDEAL, 'regions': []}
+    with pytest.raises(ConfigError, match='link_map.direction: missing'):
+        load_link_map(write(tmp_path, 'lm.yaml', yaml.safe_dump({'link_map': base})))
+    with pytest.raises(ConfigError, match='link_map.direction'):
+        load_link_map(write(tmp_path, 'lm.yaml', yaml.safe_dump({'link_map': dict(base, direction='sideways')})))
 
 
 def test_bad_link_map(tmp_path):

@@ -2,7 +2,7 @@
 
 A thin ROS node (``link_map_follower``) on the robot's master: subscribes ``base_pose_ground_truth``
 (nav_msgs/Odometry) and, whenever the robot enters another region of the map (``config/link_map_*.yaml``),
-sets both directions of the emulated link to that region's conditions (dead zone = outage).
+sets the map's direction(s) of the emulated link to that region's conditions (dead zone = outage).
 """
 from __future__ import annotations
 
@@ -21,9 +21,9 @@ def follow(testbed, map_path: str) -> None:
         name, cond = link_map.conditions_at(p.x, p.y)
         if name != state['region']:
             state['region'] = name
-            testbed.set('both', delay=cond.delay, jitter=cond.jitter, loss=cond.loss, rate=cond.rate,
+            testbed.set(link_map.direction, delay=cond.delay, jitter=cond.jitter, loss=cond.loss, rate=cond.rate,
                         outage=cond.outage)
-            rospy.loginfo(f'robot at ({p.x:.1f}, {p.y:.1f}) entered {name}: delay {cond.delay:g} ms, '
+            rospy.loginfo(f'robot at ({p.x:.1f}, {p.y:.1f}) entered {name} ({link_map.direction}): delay {cond.delay:g} ms, '
                           f'loss {cond.loss:g}, rate {cond.rate:g} Mbit/s' + (', OUTAGE' if cond.outage else ''))
 
     rospy.Subscriber('base_pose_ground_truth', Odometry, on_pose, queue_size=1)

@@ -166,6 +166,7 @@ class Region:
 class LinkMap:
     regions: List[Region]
     default: Conditions
+    direction: str = 'both'      # which direction(s) of the link the map sets: up, down or both
 
     def conditions_at(self, x: float, y: float) -> Tuple[str, Conditions]:
         """The first region containing (x, y), else the default."""
@@ -176,8 +177,9 @@ class LinkMap:
 
 
 def load_link_map(path: str) -> LinkMap:
-    """``link_map: {default: {conditions}, regions: [{name, x: [min, max], y: [min, max], <conditions>}]}``;
-    a dead zone is a region with ``outage: true``."""
+    """``link_map: {direction, default: {conditions}, regions: [{name, x: [min, max], y: [min, max], <conditions>}]}``;
+    a dead zone is a region with ``outage: true``; ``direction`` (up, down, both) is the direction the map sets
+    (up: robot -> cloud only, the other direction keeps its conditions)."""
     doc = Section.from_file(path).section('link_map')
     default = conditions_from(doc.section('default'))
     regions = []
@@ -189,4 +191,4 @@ def load_link_map(path: str) -> LinkMap:
         cond = Section({k: v for k, v in r.data.items() if k not in ('name', 'x', 'y')}, r.source, r.prefix)
         regions.append(Region(r.string('name'), x[0], x[1], y[0], y[1],
                               conditions_from(cond, default)))
-    return LinkMap(regions, default)
+    return LinkMap(regions, default, doc.string('direction', choices=('up', 'down', 'both')))
