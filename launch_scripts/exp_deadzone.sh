@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
 # exp_deadzone.sh — the paper's dead-zone experiment (thesis Appendix VI, Fig. 10-11), on the testbed (root).
 #
-#   launch_scripts/exp_deadzone.sh [--runs N] [--modes normal,network_aware,normal_uplink] [--out DIR] [--fresh]
+#   launch_scripts/exp_deadzone.sh [--runs N] [--modes normal,network_aware[,normal_uplink]] [--out DIR] [--fresh]
 #
 # The corridor (config/scenarios/deadzone.yaml: 2 m x 12 m, a pair of heaters, the global goal module's Z
 # route) with Wi-Fi only near both ends (the link follows the robot's position); N runs per mode (default 5),
-# alternating:
+# alternating (default modes normal and network_aware):
 #   normal         GG and MFG on the cloud (placement paper_normal), dead zone cuts both directions
 #                  (config/link_map_corridor.yaml)
 #   network_aware  GG on the cloud, MFG on the robot (paper_network_aware), the same dead zone
@@ -18,7 +18,7 @@
 # DIR/deadzone.png (temperature vs measurement number, the paper's plot). About 2 minutes per run.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
-runs=5; out="$CNR_WS/bench_results/deadzone"; fresh=""; modes="normal,network_aware,normal_uplink"
+runs=5; out="$CNR_WS/bench_results/deadzone"; fresh=""; modes="normal,network_aware"
 while [ $# -gt 0 ]; do
   case "$1" in
     --runs) runs="${2:?}"; shift 2 ;;

@@ -60,7 +60,8 @@ class MissionMonitor:
         rospy.Subscriber('hotspot', Hotspot, self._on_hotspot, queue_size=1)
         rospy.Subscriber('merged_measurements', MergedMeasurement, self._on_measurement, queue_size=100)
         rospy.Subscriber('mfg/state', SearchState, self._on_state, queue_size=20)
-        rospy.Subscriber('mfg/activity', MfgActivity, lambda m: setattr(self, 'activity', m), queue_size=1)
+        self.activity_received = 0.0
+        rospy.Subscriber('mfg/activity', MfgActivity, self._on_activity, queue_size=1)
         if profile_topic:
             rospy.Subscriber(profile_topic, NetworkProfile, self._on_profile, queue_size=10)
 
@@ -83,6 +84,9 @@ class MissionMonitor:
         if self.battery_first is None:
             self.battery_first = msg
         self.battery_last = msg
+
+    def _on_activity(self, msg: MfgActivity) -> None:
+        self.activity, self.activity_received = msg, rospy.Time.now().to_sec()
 
     def _on_profile(self, msg: NetworkProfile) -> None:
         if self.start_sim is not None:
@@ -168,7 +172,10 @@ class MissionMonitor:
             mfg_activity=None if self.activity is None else dict(
                 measurements=self.activity.measurements, longest_input_gap=self.activity.longest_input_gap,
                 goal_waits=self.activity.goal_waits, goal_wait_total=self.activity.goal_wait_total,
-                goal_wait_longest=self.activity.goal_wait_longest, longest_idle=self.activity.longest_idle),
+                goal_wait_longest=self.activity.goal_wait_longest, longest_idle=self.activity.longest_idle,
+                # the MFG's reports stop reaching the robot when it is cut off (it runs on the cloud): the time
+                # since the last one is time the MFG could not act on the robot
+                unreachable_at_end=now - self.activity_received),
             heat_sources=[dict(name=n, x=x, y=y) for n, x, y in self.sources])
         if cells:
             occ = extent = None

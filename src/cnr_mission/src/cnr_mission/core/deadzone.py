@@ -62,8 +62,11 @@ def load_run(folder: str, mode: str, index: int) -> Optional[Run]:
     act = s.get('mfg_activity') or {}
     path = os.path.join(folder, 'measurements.tsv')
     temps = [m.temperature for m in read_tsv(path)] if os.path.exists(path) else []
+    idle = act.get('longest_idle')
+    if idle is not None:      # an MFG cut off from the robot at the end was idle at least that long
+        idle = max(idle, act.get('unreachable_at_end') or 0.0)
     return Run(mode, index, folder, bool(s.get('found')), s.get('sim_time_to_find'), s.get('measurements_to_hotspot'),
-               act.get('longest_idle'), act.get('longest_input_gap'), act.get('goal_wait_longest'),
+               idle, act.get('longest_input_gap'), act.get('goal_wait_longest'),
                (s.get('two_host') or {}).get('wall_time_total'), temps)
 
 
@@ -163,7 +166,8 @@ def write_outputs(out: str, runs: Sequence[Run], command: str) -> str:
                     'link_map_corridor_uplink.yaml: robot → cloud only), global goal manager on the cloud sending '
                     'the Z route (coverage_sweep), 50 measurements (16 s) after the hotspot, real time. Time from '
                     'the start of the run; "idle" = the MFG received no measurement or waited for a global goal '
-                    '(mfg/activity). Median (IQR, range, n).', '', table(runs), '',
+                    '(mfg/activity), or its reports no longer reached the robot at the end (cut off). '
+                    'Median (IQR, range, n).', '', table(runs), '',
                     '![temperature vs measurement number](deadzone.png)', ''])
     with open(os.path.join(out, 'deadzone.md'), 'w') as f:
         f.write(md)
