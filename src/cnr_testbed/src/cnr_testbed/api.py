@@ -17,6 +17,7 @@ import time
 from typing import Dict, List, Optional, Sequence
 
 from cnr_testbed import netns
+from cnr_testbed.core import cpucap as cpucap_core
 from cnr_testbed.core.config import TestbedConfig, load_testbed
 from cnr_testbed.emulator import cleanup, pid_path, socket_path
 
@@ -68,6 +69,11 @@ class Testbed:
     @property
     def cloud_address(self) -> str:
         return self.cfg.cloud_address
+
+    @property
+    def robot_cgroup(self) -> str:
+        """Name of the robot's CPU-capped cgroup (:mod:`cnr_testbed.cpucap`)."""
+        return cpucap_core.default_name(self.cfg.name)
 
     def namespace(self, side: str) -> str:
         if side not in ('robot', 'cloud'):
@@ -137,6 +143,19 @@ class Testbed:
             if _alive(pid):
                 os.kill(pid, signal.SIGKILL)
         cleanup(self.cfg)
+        self.remove_robot_cgroup()
+
+    def remove_robot_cgroup(self) -> None:
+        """Delete the robot's CPU cgroup if present (processes still inside move to the parent group)."""
+        from cnr_testbed import cpucap
+        try:
+            cg = cpucap.CpuCgroup(cpucap.detect(), self.robot_cgroup)
+            if cg.exists():
+                cg.remove()
+        except cpucap.NoCgroup:
+            pass
+        except OSError as exc:
+            print(f'testbed: cannot remove the cgroup {self.robot_cgroup}: {exc}', file=sys.stderr)
 
     def status(self) -> Dict:
         try:
