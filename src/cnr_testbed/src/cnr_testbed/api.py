@@ -42,6 +42,12 @@ def request(name: str, req: Dict, timeout: float = 5.0) -> Dict:
 
 
 def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs; reaps it if it is this process's exited child (a zombie would count as alive)."""
+    try:
+        if os.waitpid(pid, os.WNOHANG)[0] == pid:
+            return False
+    except ChildProcessError:
+        pass
     try:
         os.kill(pid, 0)
         return True
