@@ -145,7 +145,8 @@ def test_robot_side_capped_and_its_tun_device_counted(testbed):
     code = ('import subprocess, sys\nfrom cnr_sim.core.battery import NetMeter\n'
             'm, every = NetMeter(sys.argv[1]), NetMeter("")\nm.sample(); every.sample()\n'
             'subprocess.run(["ping", "-q", "-c", "5", "-i", "0.05", "-s", "1000", sys.argv[2]], check=True,'
-            ' capture_output=True)\nprint(open("/proc/self/cgroup").read()); print("bytes", m.sample(), every.sample())\n')
+            ' capture_output=True)\nprint(open("/proc/self/cgroup").read())\n'
+            'print("bytes", m.sample(), every.sample())\n')
     r = subprocess.run([PY, '-m', 'cnr_testbed.cli', '--name', testbed.cfg.name, 'robot', '--', PY, '-c', code,
                         testbed.cfg.robot_dev, testbed.cloud_address], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr

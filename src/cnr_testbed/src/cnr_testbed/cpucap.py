@@ -30,11 +30,12 @@ import os
 import signal
 import sys
 import time
-from typing import Dict, List, Optional, Sequence
+from typing import Dict, List, Optional, Sequence, Tuple
 
 from cnr_params import ConfigError
 
 from cnr_testbed.core import cpucap as core
+from cnr_testbed.core.config import TestbedConfig, load_testbed
 from cnr_testbed.core.cpucap import Layout, NoCgroup, Throttling
 
 WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
@@ -137,7 +138,7 @@ class CpuCgroup:
         for name, text in core.limit_files(self.layout.version, cpus, period_us):
             _write(os.path.join(self.cpu_dir, name), text)
 
-    def limit(self):
+    def limit(self) -> Tuple[Optional[float], int]:
         """(cpus or None when unlimited, period [us])."""
         names = ('cpu.cfs_period_us', 'cpu.cfs_quota_us') if self.layout.version == 1 else ('cpu.max',)
         return core.parse_limit(self.layout.version, {n: _read(os.path.join(self.cpu_dir, n)) for n in names})
@@ -300,7 +301,7 @@ def _exec(command: List[str]) -> int:
     return 0  # not reached
 
 
-def _join(args, cfg, name: str) -> None:
+def _join(args: argparse.Namespace, cfg: TestbedConfig, name: str) -> None:
     """Create-if-missing and join the group ``name``; raises NoCgroup/OSError/ValueError."""
     if os.geteuid() != 0:
         raise NoCgroup('not root')
@@ -313,7 +314,6 @@ def _join(args, cfg, name: str) -> None:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = parser().parse_args(argv)
-    from cnr_testbed.core.config import load_testbed
     try:
         cfg = load_testbed(args.config)
     except ConfigError as exc:

@@ -184,7 +184,8 @@ def report(out: Dict) -> str:
              '| slowdown (configured ' + f"{out['slowdown']:g}" + ') | median | per run |', '|---|---|---|',
              f"| capped wall / uncapped wall | {w['ratio_wall']:.2f} | "
              f"{min(w['runs_wall']):.2f}-{max(w['runs_wall']):.2f} |",
-             f"| capped wall / uncapped CPU | {w['ratio_cpu']:.2f} | {min(w['runs_cpu']):.2f}-{max(w['runs_cpu']):.2f} |",
+             f"| capped wall / uncapped CPU | {w['ratio_cpu']:.2f} | "
+             f"{min(w['runs_cpu']):.2f}-{max(w['runs_cpu']):.2f} |",
              f"| CPU inflation (capped CPU / uncapped CPU) | {w['inflation']:.2f} | |", '',
              '## (b) Wake-up lateness of a 10 ms periodic loop, CPU hog in the same cgroup', '',
              '| setting | quota | median | p95 | max | periods throttled |', '|---|---|---|---|---|---|']

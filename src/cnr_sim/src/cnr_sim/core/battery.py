@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Dict, Iterable, Optional, Set
+from typing import Dict, Iterable, Optional, Set, Union
 
 from cnr_params import Section
 
@@ -227,7 +227,7 @@ class CgroupCpuMeter:
         return used - prev if used >= prev else used
 
 
-def cpu_meter(cgroup: str):
+def cpu_meter(cgroup: str) -> Union[CpuMeter, CgroupCpuMeter]:
     """The CPU meter for ``~battery/cpu_cgroup``: the cgroup's, or ('') one over the robot's processes."""
     return CgroupCpuMeter(cgroup) if cgroup else CpuMeter()
 
