@@ -187,11 +187,8 @@ class CpuCgroup:
                     else:
                         for d in self.dirs:
                             _write(os.path.join(os.path.dirname(d), 'cgroup.procs'), str(pid))
-                except (ProcessLookupError, FileNotFoundError):
+                except (ProcessLookupError, FileNotFoundError):   # exited meanwhile (ESRCH)
                     continue
-                except OSError as exc:
-                    if exc.errno != 3:   # ESRCH: gone meanwhile
-                        raise
             try:
                 for d in reversed(self.dirs):
                     if os.path.isdir(d):
