@@ -26,10 +26,10 @@ from std_srvs.srv import Empty, EmptyResponse
 import cnr_params
 from cnr_maps.mapio import load_map
 from cnr_maps.pose import Pose2D, yaw_to_quaternion
-from cnr_msgs.msg import Collision
+from cnr_msgs.msg import BatteryEnergy, Collision
 from cnr_msgs.srv import Teleport, TeleportResponse
 from cnr_params.ros import init_node, private_section
-from cnr_sim.core.battery import BatteryModel, CpuMeter, NetMeter
+from cnr_sim.core.battery import BatteryModel, NetMeter, cpu_meter
 from cnr_sim.core.world import World
 from cnr_sim.params import SimulatorParams, read_params
 
@@ -116,6 +116,7 @@ class SimulatorNode:
         self.gt_pub = rospy.Publisher('base_pose_ground_truth', Odometry, queue_size=10)
         self.scan_pub = rospy.Publisher('scan', LaserScan, queue_size=5)
         self.battery_pub = rospy.Publisher('battery_state', BatteryState, queue_size=2)
+        self.energy_pub = rospy.Publisher('battery/energy', BatteryEnergy, queue_size=2)
         self.collision_pub = rospy.Publisher('mobile_base/events/collision', Collision, queue_size=10)
         self.obstacles_pub = rospy.Publisher('obstacles', PoseArray, queue_size=2)
         self.tf = tf2_ros.TransformBroadcaster()
@@ -125,7 +126,7 @@ class SimulatorNode:
         rospy.Service('teleport', Teleport, self._on_teleport)
         self._scan_msg = self._scan_template()
         self._procs = RobotProcesses(ns)
-        self._cpu = CpuMeter() if params.battery_enabled else None
+        self._cpu = cpu_meter(params.battery_cpu_cgroup) if params.battery_enabled else None
         self._net = NetMeter(params.battery_interface) if params.battery_enabled else None
         self._next_battery = 0.0
         self.rtf_achieved = 0.0
@@ -225,6 +226,7 @@ class SimulatorNode:
         if w.time + 1e-9 >= self._next_battery:
             self._next_battery = w.time + 1.0 / p.battery_rate
             self.battery_pub.publish(self._battery_msg(stamp))
+            self.energy_pub.publish(self._energy_msg(stamp))
 
     def _battery_msg(self, stamp) -> BatteryState:
         b, c = self.battery, self.p.battery
@@ -245,6 +247,11 @@ class SimulatorNode:
                            f'cpu={b.energy.cpu:.1f}J radio={b.energy.radio:.1f}J')
         return m
 
+    def _energy_msg(self, stamp) -> BatteryEnergy:
+        b, e = self.battery, self.battery.energy
+        return BatteryEnergy(header=rospy.Header(stamp=stamp), idle=e.idle, motors=e.motors, cpu=e.cpu,
+                             radio=e.radio, total=e.total, cpu_seconds=b.cpu_seconds, radio_bytes=b.radio_bytes)
+
     # -- loops ---------------------------------------------------------------------------------
     def _measure_loop(self) -> None:
         """Measure the robot's CPU time and radio bytes (wall-clock period) and feed the battery."""
@@ -253,13 +260,15 @@ class SimulatorNode:
         last_sim = self.world.time
         while not rospy.is_shutdown():
             now = time.monotonic()
-            if now - last_refresh > 5.0:
+            if self._cpu.needs_pids and now - last_refresh > 5.0:
                 last_refresh = now
                 try:
                     self._cpu.set_pids(self._procs.pids())
                 except Exception as exc:
                     rospy.logwarn_throttle(30.0, f'cannot list the robot processes on the master: {exc}')
             cpu = self._cpu.sample()
+            if self._cpu.problem:
+                rospy.logwarn_throttle(30.0, f'battery: CPU time not charged: {self._cpu.problem}')
             net = self._net.sample()
             with self.lock:
                 sim_dt = self.world.time - last_sim

@@ -33,6 +33,7 @@ class SimulatorParams:
     battery: BatteryConfig
     battery_rate: float
     battery_interface: str
+    battery_cpu_cgroup: str
     battery_measure_period: float
     battery_enabled: bool
     obstacles: List[MovingObstacle]
@@ -105,6 +106,7 @@ def read_params(p: Section) -> SimulatorParams:
         battery=BatteryConfig.from_section(bat),
         battery_rate=bat.number('publish_rate', positive=True),
         battery_interface=bat.string('interface'),
+        battery_cpu_cgroup=bat.string('cpu_cgroup'),
         battery_measure_period=bat.number('measure_period', positive=True),
         battery_enabled=bat.boolean('measure_work'),
         obstacles=obstacles_from_config(p) if p.boolean('enable_obstacles') else [],

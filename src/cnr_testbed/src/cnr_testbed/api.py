@@ -17,6 +17,7 @@ import time
 from typing import Dict, List, Optional, Sequence
 
 from cnr_testbed import netns
+from cnr_testbed.core import cpucap as cpucap_core
 from cnr_testbed.core.config import TestbedConfig, load_testbed
 from cnr_testbed.emulator import cleanup, pid_path, socket_path
 
@@ -41,6 +42,12 @@ def request(name: str, req: Dict, timeout: float = 5.0) -> Dict:
 
 
 def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs; reaps it if it is this process's exited child (a zombie would count as alive)."""
+    try:
+        if os.waitpid(pid, os.WNOHANG)[0] == pid:
+            return False
+    except ChildProcessError:
+        pass
     try:
         os.kill(pid, 0)
         return True
@@ -68,6 +75,11 @@ class Testbed:
     @property
     def cloud_address(self) -> str:
         return self.cfg.cloud_address
+
+    @property
+    def robot_cgroup(self) -> str:
+        """Name of the robot's CPU-capped cgroup (:mod:`cnr_testbed.cpucap`)."""
+        return cpucap_core.default_name(self.cfg.name)
 
     def namespace(self, side: str) -> str:
         if side not in ('robot', 'cloud'):
@@ -137,6 +149,19 @@ class Testbed:
             if _alive(pid):
                 os.kill(pid, signal.SIGKILL)
         cleanup(self.cfg)
+        self.remove_robot_cgroup()
+
+    def remove_robot_cgroup(self) -> None:
+        """Delete the robot's CPU cgroup if present (processes still inside move to the parent group)."""
+        from cnr_testbed import cpucap
+        try:
+            cg = cpucap.CpuCgroup(cpucap.detect(), self.robot_cgroup)
+            if cg.exists():
+                cg.remove()
+        except cpucap.NoCgroup:
+            pass
+        except OSError as exc:
+            print(f'testbed: cannot remove the cgroup {self.robot_cgroup}: {exc}', file=sys.stderr)
 
     def status(self) -> Dict:
         try:

@@ -6,6 +6,8 @@
                    [--queue PKTS] [--outage on|off] [--reorder on|off]
     testbed.sh trace FILE                          follow a TSV trace of conditions (Ctrl-C stops)
     testbed.sh follow [--map FILE]                 follow the robot through a link-quality map (ROS)
+    testbed.sh robot [--uncapped] -- CMD [ARGS...]  run CMD on the robot: its namespace, inside its CPU cap
+    testbed.sh cpu [--json]                        the robot's CPU cap: limit, CPU used, throttling
 
 Delays are one-way per direction: --delay 25 on both directions adds 50 ms of RTT.
 """
@@ -61,6 +63,11 @@ def parser() -> argparse.ArgumentParser:
     t.add_argument('file')
     f = sub.add_parser('follow')
     f.add_argument('--map', default=os.path.join(WS, 'config', 'link_map_corridor.yaml'))
+    r = sub.add_parser('robot')
+    r.add_argument('--uncapped', action='store_true', help='without the CPU cap (testbed.robot_cpu)')
+    r.add_argument('command', nargs=argparse.REMAINDER, help='-- CMD [ARGS...]')
+    c = sub.add_parser('cpu')
+    c.add_argument('--json', action='store_true')
     return ap
 
 
@@ -124,6 +131,18 @@ def main(argv=None) -> int:
         elif args.cmd == 'follow':
             from cnr_testbed.follower import follow
             follow(tb, args.map)
+        elif args.cmd == 'robot':
+            from cnr_testbed.cpucap import run_argv
+            command = args.command[1:] if args.command[:1] == ['--'] else args.command
+            if not command:
+                raise TestbedError('robot needs a command: testbed.sh robot -- CMD [ARGS...]')
+            argv = ['ip', 'netns', 'exec', tb.namespace('robot'), *command]
+            argv = argv if args.uncapped else run_argv(argv, tb.robot_cgroup, tb.config_path)
+            os.execvp(argv[0], argv)
+        elif args.cmd == 'cpu':
+            from cnr_testbed.cpucap import main as cpucap_main
+            return cpucap_main(['--config', tb.config_path, 'status', '--name', tb.robot_cgroup]
+                               + (['--json'] if args.json else []))
     except ConfigError as exc:
         print(f'testbed.sh: {exc}', file=sys.stderr)
         return 2

@@ -4,8 +4,10 @@ ROS-free. Power drawn from the 14.8 V Li-ion pack [W]:
 
     P = P_base_idle + P_laptop_idle                                 (constant, from config)
       + (m g c_rr |v| + m |a v| + I |alpha w| + c_turn |w|) / eta     (motors, from the simulated motion)
-    E_cpu   = k_cpu  * (CPU seconds actually used by the robot's processes, measured with psutil)
-    E_radio = e_byte * (bytes actually sent + received on the robot's interface, measured with psutil)
+    E_cpu   = k_cpu  * (CPU seconds actually used by the robot's computer: the processes of its cgroup, read
+                        from the cgroup's accounting, or else the robot's processes, measured with psutil)
+    E_radio = e_byte * (bytes actually sent + received on the robot's interface, measured with psutil in the
+                        caller's network namespace)
 
 Energy integrates over sim time for the first two terms; the CPU and radio terms are energy for work
 that really happened, so they do not depend on the real-time factor. State of charge drops by
@@ -16,7 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Dict, Iterable, Optional, Set
+from typing import Dict, Iterable, Optional, Set, Union
 
 from cnr_params import Section
 
@@ -85,6 +87,8 @@ class BatteryModel:
         self.config = config
         self.capacity_j = config.capacity_ah * 3600.0 * config.nominal_voltage
         self.energy = EnergyBreakdown()
+        self.cpu_seconds = 0.0    # CPU time charged so far [s]
+        self.radio_bytes = 0      # radio traffic charged so far [bytes]
         self.power = 0.0          # latest total power [W] (idle + motors + measured work rate)
         self._cpu_rate = 0.0
         self._radio_rate = 0.0
@@ -112,6 +116,8 @@ class BatteryModel:
         e_radio = c.radio_joules_per_byte * max(bytes_transferred, 0.0)
         self.energy.cpu += e_cpu
         self.energy.radio += e_radio
+        self.cpu_seconds += max(cpu_seconds, 0.0)
+        self.radio_bytes += int(max(bytes_transferred, 0))
         if interval > 0:
             self._cpu_rate = e_cpu / interval
             self._radio_rate = e_radio / interval
@@ -141,6 +147,9 @@ class BatteryModel:
 
 class CpuMeter:
     """CPU seconds used by a changing set of processes (psutil cpu_times deltas)."""
+
+    needs_pids = True         # the caller keeps the set current with set_pids()
+    problem = ''
 
     def __init__(self) -> None:
         import psutil
@@ -186,8 +195,49 @@ class CpuMeter:
         return used
 
 
+class CgroupCpuMeter:
+    """CPU seconds used by the processes of a cgroup (:mod:`cnr_testbed.cpucap`): exactly the robot's computer,
+    exited processes included.
+
+    A group that appears after the meter started is charged from its creation; one that is re-created (its
+    usage restarts) from the new start. ``problem`` says why the last sample could not be read ('' if it was).
+    """
+
+    needs_pids = False
+
+    def __init__(self, name: str) -> None:
+        from cnr_testbed.cpucap import UsageReader
+        self._reader = UsageReader(name)
+        self._last: Optional[float] = None
+        self._missed_first = False
+
+    @property
+    def problem(self) -> str:
+        return self._reader.problem
+
+    def sample(self) -> float:
+        """CPU seconds used since the previous sample (0 while the group cannot be read)."""
+        used = self._reader.read()
+        if used is None:
+            self._missed_first = self._missed_first or self._last is None
+            return 0.0
+        prev, self._last = self._last, used
+        if prev is None:
+            return used if self._missed_first else 0.0
+        return used - prev if used >= prev else used
+
+
+def cpu_meter(cgroup: str) -> Union[CpuMeter, CgroupCpuMeter]:
+    """The CPU meter for ``~battery/cpu_cgroup``: the cgroup's, or ('') one over the robot's processes."""
+    return CgroupCpuMeter(cgroup) if cgroup else CpuMeter()
+
+
 class NetMeter:
-    """Bytes sent + received on an interface ('' = every interface except loopback)."""
+    """Bytes sent + received on an interface ('' = every interface except loopback).
+
+    psutil reads /proc/net/dev, which shows the network namespace of the calling process: run inside the
+    robot's namespace (``ip netns exec robot``) it counts the robot's link (the testbed's TUN device).
+    """
 
     def __init__(self, interface: str = '') -> None:
         import psutil

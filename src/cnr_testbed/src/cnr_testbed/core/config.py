@@ -8,10 +8,36 @@ from typing import Dict, List, Optional, Tuple
 
 from cnr_params import ConfigError, Section
 
+from cnr_testbed.core import cpucap
 from cnr_testbed.core.link import Conditions, check_changes
 
 NAME_RE = re.compile(r'^[A-Za-z0-9_.-]{1,15}$')
 CONDITION_KEYS = ('delay', 'jitter', 'loss', 'rate', 'queue', 'outage', 'reorder')
+
+
+@dataclass
+class RobotCpuConfig:
+    """The robot's computer as a CPU-limited cgroup (``testbed.robot_cpu``)."""
+
+    enabled: bool
+    slowdown: float           # how many times slower a robot core is than a cloud (= this machine's) core
+    period_us: int            # CFS enforcement period [us]
+
+    @property
+    def cpus(self) -> float:
+        """The cap in CPUs' worth of this machine: one core slowed down ``slowdown`` times."""
+        return 1.0 / self.slowdown
+
+
+def robot_cpu_from(sec: Section) -> RobotCpuConfig:
+    cfg = RobotCpuConfig(enabled=sec.boolean('enabled'), slowdown=sec.number('slowdown', positive=True),
+                         period_us=sec.integer('period_us', minimum=cpucap.MIN_PERIOD_US,
+                                               maximum=cpucap.MAX_PERIOD_US))
+    try:
+        cpucap.quota_us(cfg.cpus, cfg.period_us)
+    except ValueError as exc:
+        raise sec.error('period_us', str(exc)) from None
+    return cfg
 
 
 @dataclass
@@ -27,6 +53,7 @@ class TestbedConfig:
     cloud_dev: str
     up: Conditions            # robot -> cloud
     down: Conditions          # cloud -> robot
+    robot_cpu: RobotCpuConfig
 
 
 def _name(sec: Section, key: str) -> str:
@@ -84,7 +111,8 @@ def load_testbed(path: str, overrides: Optional[Dict[str, str]] = None) -> Testb
                         prefix=prefix, mtu=t.integer('mtu', minimum=576, maximum=65000),
                         robot_dev=_name(robot, 'device'), cloud_dev=_name(cloud, 'device'),
                         up=conditions_from(link.section('up', {}), both),
-                        down=conditions_from(link.section('down', {}), both))
+                        down=conditions_from(link.section('down', {}), both),
+                        robot_cpu=robot_cpu_from(t.section('robot_cpu')))
     if cfg.robot_ns == cfg.cloud_ns:
         raise cloud.error('namespace', 'must differ from the robot namespace')
     return cfg
