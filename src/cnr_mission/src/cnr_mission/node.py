@@ -23,7 +23,7 @@ from cnr_maps.mapio import load_map
 from cnr_maps.measurements import Measurement, write_tsv
 from cnr_mission.core.report import CellSummary, path_length, render_png, write_summary
 from cnr_mission.core.scenario import read_mission
-from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, MfgActivity, NetworkProfile, SearchState
+from cnr_msgs.msg import BatteryEnergy, CellStates, Hotspot, MergedMeasurement, MfgActivity, NetworkProfile, SearchState
 from cnr_msgs.srv import GetMeasurements
 from cnr_params import ConfigError
 from cnr_params.ros import init_node, private_section
@@ -47,6 +47,8 @@ class MissionMonitor:
         self.trajectory: List[Tuple[float, float]] = []
         self.battery_first: Optional[BatteryState] = None
         self.battery_last: Optional[BatteryState] = None
+        self.energy_first: Optional[BatteryEnergy] = None
+        self.energy_last: Optional[BatteryEnergy] = None
         self.cells: Optional[CellStates] = None
         self.hotspot: Optional[Hotspot] = None
         self.measurements = 0
@@ -56,6 +58,7 @@ class MissionMonitor:
         self.wall0 = time.monotonic()
         rospy.Subscriber('base_pose_ground_truth', Odometry, self._on_pose, queue_size=10)
         rospy.Subscriber('battery_state', BatteryState, self._on_battery, queue_size=2)
+        rospy.Subscriber('battery/energy', BatteryEnergy, self._on_energy, queue_size=2)
         rospy.Subscriber('cell_states', CellStates, lambda m: setattr(self, 'cells', m), queue_size=1)
         rospy.Subscriber('hotspot', Hotspot, self._on_hotspot, queue_size=1)
         rospy.Subscriber('merged_measurements', MergedMeasurement, self._on_measurement, queue_size=100)
@@ -93,6 +96,11 @@ class MissionMonitor:
             with self.lock:
                 self.profiles.append((msg.header.stamp.to_sec() - self.start_sim, float(msg.alive), msg.rtt,
                                       msg.rtt_spread, msg.loss, msg.c_bw, msg.a_bw, msg.r_bw))
+
+    def _on_energy(self, msg: BatteryEnergy) -> None:
+        if self.energy_first is None:
+            self.energy_first = msg
+        self.energy_last = msg
 
     def _on_measurement(self, msg: MergedMeasurement) -> None:
         self.measurements += 1
@@ -164,6 +172,11 @@ class MissionMonitor:
             battery_used_percent=None if b0 is None else 100.0 * (b0.percentage - b1.percentage),
             battery_used_ah=None if b0 is None else b0.charge - b1.charge,
             battery_energy=None if b1 is None else b1.serial_number,
+            # energy drawn during the mission per consumer [J]: CPU = the robot's processes (its cgroup on the
+            # testbed), radio = bytes on the robot's link interface
+            energy=None if self.energy_first is None else {
+                k: getattr(self.energy_last, k) - getattr(self.energy_first, k)
+                for k in ('idle', 'motors', 'cpu', 'radio', 'total', 'cpu_seconds', 'radio_bytes')},
             measurements_taken=len(records) or self.measurements,
             network_profile=None if not profiles else dict(
                 file='network_profile.tsv', samples=len(profiles),

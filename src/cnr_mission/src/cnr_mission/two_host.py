@@ -40,6 +40,7 @@ from cnr_bringup.placement import Placement, launch_args, load_catalog, describe
 from cnr_harness import Proc
 from cnr_mission.core.report import write_summary
 from cnr_params.config import EXIT_CONFIG, ConfigError, load_yaml
+from cnr_testbed import cpucap
 from cnr_testbed.api import Testbed, TestbedError
 from cnr_testbed.rosside import BRIDGE_PORT, RosSide
 
@@ -77,6 +78,7 @@ class TwoHostMission:
         self.procs: Dict[str, Proc] = {}
         self.counters0: Optional[Dict] = None
         self.link_log: List[Dict] = []
+        self.cpu: Dict = {}
 
     # -- files each host's launch reads -------------------------------------------------------------------
     def _write_yaml(self, name: str, data: Dict) -> str:
@@ -105,9 +107,24 @@ class TwoHostMission:
         return self._write_yaml(f'network_monitor_{side.side}.yaml',
                                 dict(name=side.side, peer=peer.side, peer_address=peer.address))
 
-    def _battery_overlay(self) -> str:
-        """The battery charges the robot's link interface (the testbed's robot-side device)."""
-        return self._write_yaml('battery_robot.yaml', dict(battery=dict(interface=self.testbed.cfg.robot_dev)))
+    def _robot_cpu(self) -> List[str]:
+        """The prefix that runs a command inside the robot's CPU cgroup (cnr_testbed.cpucap; it says in one line
+        when no cgroup is available and runs the command uncapped)."""
+        return cpucap.run_argv([], self.testbed.robot_cgroup, self.testbed.config_path)
+
+    def robot_cpu_report(self) -> Dict:
+        """CPU used by the robot's computer (its cgroup) and how often the cap throttled it."""
+        try:
+            cg = cpucap.CpuCgroup(cpucap.detect(), self.testbed.robot_cgroup)
+            if not cg.exists():
+                return dict(cgroup=None)
+            cpus, period = cg.limit()
+            th = cg.throttling()
+            return dict(cgroup=self.testbed.robot_cgroup, limit_cpus=cpus, period_us=period,
+                        cpu_seconds=cg.usage_seconds(), throttled_periods=th.throttled,
+                        periods=th.periods, throttled_seconds=th.throttled_seconds)
+        except (OSError, cpucap.NoCgroup, ValueError) as exc:
+            return dict(cgroup=None, problem=str(exc))
 
     # -- processes -------------------------------------------------------------------------------------
     def _launch(self, side: RosSide, name: str, args: List[str], until: Optional[str] = None,
@@ -133,7 +150,7 @@ class TwoHostMission:
         self.counters0 = self.testbed.status()
         self.robot = RosSide(self.testbed, 'robot', port=self.port, log_dir=self.log_dir)
         self.cloud = RosSide(self.testbed, 'cloud', port=self.port, log_dir=self.log_dir)
-        self.robot.start_master(use_sim_time=True)
+        self.robot.start_master(use_sim_time=True, prefix=self._robot_cpu())
         self.cloud.start_master(use_sim_time=True)
         for side in (self.robot, self.cloud):
             # one run id per master, set before its launches start (roslaunch reads it from the master and
@@ -147,7 +164,9 @@ class TwoHostMission:
                                            f'map:={self.map_file}', f'x:={x}', f'y:={y}', f'a:={a}',
                                            'real_time_factor:=1', f'report_dir:={self.report_dir}',
                                            f'placement:={self.placement.name}',
-                                           f'battery_overlay:={self._battery_overlay()}'], until='mission_monitor')
+                                           f'battery_cpu_cgroup:={self.testbed.robot_cgroup}',
+                                           f'battery_interface:={self.testbed.cfg.robot_dev}'],
+                     until='mission_monitor')
         for side, peer in ((self.robot, self.cloud), (self.cloud, self.robot)):
             host_args = ['cnr_mission', 'host.launch', f'host:={side.side}', *common,
                          f'bridge_config:={self._bridge_config(side, peer)}', f'secret_file:={secret}',
@@ -157,7 +176,8 @@ class TwoHostMission:
                 host_args.append('kestrel_driver:=true')
             elif self.placement.host('move_base') == 'cloud':
                 host_args.append('map_server:=true')
-            self._launch(side, f'host_{side.side}', host_args)
+            self._launch(side, f'host_{side.side}', host_args,
+                         prefix=self._robot_cpu() if side.side == 'robot' else None)
         tb_cli = [sys.executable, '-m', 'cnr_testbed.cli', '--config', self.testbed.config_path]
         if self.trace:
             self.procs['trace'] = self.robot.run(tb_cli + ['trace', self.trace], 'trace')
@@ -205,6 +225,7 @@ class TwoHostMission:
         return offset + end
 
     def down(self) -> None:
+        self.cpu = self.robot_cpu_report()
         procs = list(self.procs.values())[::-1]
         for proc in procs:              # every launch shuts down at the same time, then each is awaited
             if proc.alive():
@@ -319,5 +340,6 @@ def main(argv: Optional[List[str]] = None) -> int:
                           bridged_topics=placement.allow('topics'), bridged_services=placement.allow('services'),
                           relayed=[s.topic for s in placement.relayed()],
                           link_set=dict(link, trace=args.trace, link_map=args.link_map),
-                          wall_time_total=time.monotonic() - wall0, **mission.link_report())))
+                          wall_time_total=time.monotonic() - wall0, robot_cpu=mission.cpu,
+                          **mission.link_report())))
     return status

@@ -64,8 +64,10 @@ class RosSide:
         self.procs.append(proc)
         return proc
 
-    def start_master(self, use_sim_time: bool = False, timeout: float = 20.0) -> None:
-        self.master = self.run(['rosmaster', '--core', '-p', str(self.port)], 'rosmaster')
+    def start_master(self, use_sim_time: bool = False, timeout: float = 20.0,
+                     prefix: Sequence[str] = ()) -> None:
+        """The side's rosmaster; ``prefix`` wraps the command (e.g. :func:`cnr_testbed.cpucap.run_argv`'s)."""
+        self.master = self.run([*prefix, 'rosmaster', '--core', '-p', str(self.port)], 'rosmaster')
         wait_until(self.master_up, timeout, f'the rosmaster of {self.side}', self.master)
         self.call('setParam', '/use_sim_time', use_sim_time)
 
