@@ -152,3 +152,35 @@ def test_missing_parameter_exits_2_naming_it(ros, workspace, tmp_path):
     assert r.returncode == 2
     lines = [line for line in r.stderr.splitlines() if line.strip()]
     assert len(lines) == 1 and '/sf_bad: sender.window: missing' in lines[0], r.stderr
+
+
+def test_a_relayed_message_is_never_relayed_again(ros, tmp_path):
+    """The receiver publishes on the sender's input topic (on two masters: the output topic bridged back to the
+    robot): the sender recognises the relay's connection header and ignores those messages. Both nodes come
+    from store_forward.launch with the shipped config."""
+    from cnr_msgs.msg import MergedMeasurement, StoreForwardStatus
+    got, status = [], []
+    pub = rospy.Publisher(IN, MergedMeasurement, queue_size=100)
+    subs = [rospy.Subscriber(IN, MergedMeasurement, got.append, queue_size=None),
+            rospy.Subscriber('/sf_sender_loop/status', StoreForwardStatus, status.append)]
+    common = ['stream:=loop', f'input_topic:={IN}', f'output_topic:={IN}', f'queue_dir:={tmp_path}/q',
+              f'state_dir:={tmp_path}/s']
+    procs = []
+    try:
+        for role in ('receiver', 'sender'):                   # one after the other: roslaunch sets /run_id
+            procs.append(ros.master.roslaunch('cnr_store_forward', 'store_forward.launch', f'role:={role}',
+                                              f'node_name:=sf_{role}_loop', *common))
+            wait_until(lambda: f'/sf_{role}_loop' in ros.master.node_names(), 60, f'the {role}', procs[-1])
+        wait_until(lambda: pub.get_num_connections() == 2, 60, 'the sender subscribed', procs[1])
+        for i in range(1, 6):
+            pub.publish(MergedMeasurement(temperature=float(i)))
+        wait_until(lambda: status and status[-1].ignored == 5 and status[-1].queued == 0, 60,
+                   'the relayed copies ignored', procs[1])
+        assert status[-1].last_seq == 5 and status[-1].appended == 5
+        assert sorted(int(m.temperature) for m in got) == [1, 1, 2, 2, 3, 3, 4, 4, 5, 5]   # direct + relayed once
+    finally:
+        for sub in subs:
+            sub.unregister()
+        pub.unregister()
+        for proc in procs:
+            ros.master.stop_child(proc)

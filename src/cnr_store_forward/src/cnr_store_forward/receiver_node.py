@@ -16,37 +16,13 @@ import warnings
 from typing import Optional, Tuple, Type
 
 import rospy
-import roslib.message
 
 from cnr_msgs.msg import StoreForwardAck, StoreForwardBatch, StoreForwardStatus
 from cnr_params import exit_on_config_error
 from cnr_params.ros import init_node, private_section
 from cnr_store_forward.core import config as sf_config
 from cnr_store_forward.core.receiver import Receiver
-from cnr_store_forward.sender_node import ros_time
-
-
-def raw_message_class(type_name: str, md5sum: str) -> Type[rospy.AnyMsg]:
-    """A message class that publishes already serialized bytes as ``type_name``.
-
-    The definition (for tools such as rostopic and rosbag) comes from the local message package if it is
-    installed and has the same MD5 sum, else it is empty (typed subscribers do not need it).
-    """
-    definition = ''
-    try:
-        local = roslib.message.get_message_class(type_name)
-    except (ValueError, ImportError):
-        local = None
-    if local is not None and local._md5sum == md5sum:
-        definition = local._full_text
-    return type('StoreForwardRaw', (rospy.AnyMsg,), {
-        '__slots__': (), '_type': type_name, '_md5sum': md5sum, '_full_text': definition, '_has_header': False})
-
-
-def raw_message(cls: Type[rospy.AnyMsg], data: bytes) -> rospy.AnyMsg:
-    msg = cls()
-    msg._buff = data
-    return msg
+from cnr_store_forward.wire import RELAY_HEADER, raw_message, raw_message_class, ros_time
 
 
 class ReceiverNode:
@@ -80,7 +56,8 @@ class ReceiverNode:
             with warnings.catch_warnings():
                 # synchronous on purpose: publish() returns once the message is in the consumer's connection
                 warnings.simplefilter('ignore', SyntaxWarning)
-                self.out_pub = rospy.Publisher(self.cfg.output_topic, self.out_class, queue_size=None)
+                self.out_pub = rospy.Publisher(self.cfg.output_topic, self.out_class, queue_size=None,
+                                               headers={RELAY_HEADER: self.cfg.common.stream})
             self.kind = kind
             self.receiver.set_kind(kind)
             if not self.out_class._full_text:

@@ -20,12 +20,9 @@ from cnr_params.ros import init_node, private_section
 from cnr_store_forward.core import config as sf_config
 from cnr_store_forward.core.queue import DiskQueue, QueueError, Record
 from cnr_store_forward.core.sender import Sender
+from cnr_store_forward.wire import RELAY_HEADER, ros_time
 
 DATA_QUEUE = 10         # batches rospy may hold per connection while the link is slow (older ones dropped)
-
-
-def ros_time(stamp_ns: int) -> rospy.Time:
-    return rospy.Time(secs=stamp_ns // 1_000_000_000, nsecs=stamp_ns % 1_000_000_000)
 
 
 class SenderNode:
@@ -50,6 +47,7 @@ class SenderNode:
                           f'disk (lost without fsync); sequence numbers continue at {r.skipped_to}')
         self.sender = Sender(self.queue, cfg.settings)
         self.type_rejected = 0
+        self.ignored = 0
         self.reported_full = False
         meta = self.queue.meta
         self.type: Tuple[str, str] = (meta.get('type', ''), meta.get('md5sum', ''))
@@ -62,6 +60,13 @@ class SenderNode:
     # ---------------------------------------------------------------- input and acks
     def on_input(self, msg: rospy.AnyMsg) -> None:
         header = msg._connection_header
+        if RELAY_HEADER in header:
+            self.ignored += 1
+            if self.ignored == 1:
+                rospy.logwarn(f'store_forward sender {self.cfg.common.stream}: ignoring {self.cfg.input_topic} from '
+                              f'{header.get("callerid")}, the receiver of stream {header[RELAY_HEADER]}: relayed '
+                              f'messages are never relayed again (is the topic bridged back to this master?)')
+            return
         kind = (header.get('type', ''), header.get('md5sum', ''))
         stamp = time.time_ns()
         with self.lock:
@@ -126,7 +131,7 @@ class SenderNode:
             stream=self.cfg.common.stream, role='sender', epoch=q.epoch, type=self.type[0], last_seq=q.last_seq,
             acked_seq=q.acked, queued=q.unacked, queued_bytes=q.unacked_bytes, in_flight=s.in_flight,
             appended=q.appended, sent=s.sent, resent=s.resent, timeouts=s.timeouts, full=q.full,
-            rejected=q.rejected + self.type_rejected, oldest_unacked_age=age)
+            rejected=q.rejected + self.type_rejected, ignored=self.ignored, oldest_unacked_age=age)
         msg.header.stamp = ros_time(time.time_ns())
         return msg
 
