@@ -114,7 +114,9 @@ class Bench:
                 'relayed_max_ms': max(r), 'added_median_ms': statistics.median(r) - statistics.median(d)}
 
     def drain(self, changes: Dict[str, Any], count: int) -> Dict[str, Any]:
-        """``count`` records stored while the receiver is down, then drained: records/s in and out."""
+        """An outage: the receiver is stopped, ``count`` records are stored meanwhile and the sender backs off to
+        ``max_backoff``; then the receiver is started again. Records/s stored and drained, and the time from
+        the receiver's start to the first delivery."""
         import rospy
         from cnr_msgs.msg import MergedMeasurement, StoreForwardStatus
         stream = self.configure(changes)
@@ -124,16 +126,22 @@ class Bench:
         subs = [rospy.Subscriber(OUT, MergedMeasurement, lambda m: arrived.append(time.monotonic()), queue_size=None),
                 rospy.Subscriber(f'/sf_sender_{stream}/status', StoreForwardStatus,
                                  lambda m: status.__setitem__(0, m))]
-        sender = self.start('sender', stream)
-        procs = [sender]
+        receiver, sender = self.start('receiver', stream), self.start('sender', stream)
+        procs = [receiver, sender]
         try:
             wait_until(lambda: pub.get_num_connections() == 1, 30, 'the sender subscribed', sender)
             msg = MergedMeasurement()
+            pub.publish(msg)
+            wait_until(lambda: arrived, 30, 'the first record relayed', sender)
+            self.master.stop_child(receiver)
+            procs.remove(receiver)
             t0 = time.monotonic()
             for _ in range(count):
                 pub.publish(msg)
-            wait_until(lambda: status[0] is not None and status[0].appended >= count, 120, 'all stored', sender)
+            wait_until(lambda: status[0] is not None and status[0].appended >= count + 1, 120, 'all stored', sender)
             stored = time.monotonic() - t0
+            wait_until(lambda: status[0].timeouts >= 4, 60, 'the sender backed off', sender)
+            arrived.clear()
             t1 = time.monotonic()
             procs.append(self.start('receiver', stream))
             wait_until(lambda: len(arrived) >= count, 600, 'the backlog drained', sender)

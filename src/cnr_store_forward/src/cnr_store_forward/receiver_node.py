@@ -38,6 +38,7 @@ class ReceiverNode:
         self.out_class: Optional[Type[rospy.AnyMsg]] = None
         self.out_pub: Optional[rospy.Publisher] = None
         self.held = 0
+        self.seen = (0, 0)          # (epoch, sender's ack) of the newest batch, for the repeated ack
         self.ack_pub = rospy.Publisher(cfg.common.topic('ack'), StoreForwardAck, queue_size=50)
         self.status_pub = rospy.Publisher('~status', StoreForwardStatus, queue_size=5)
         if self.receiver.kind[0]:
@@ -70,6 +71,7 @@ class ReceiverNode:
             return
         ack = None
         with self.lock:
+            self.seen = (batch.epoch, batch.acked_seq)
             pub = self.output((batch.type, batch.md5sum))
             if self.cfg.require_consumer and pub.get_num_connections() == 0:
                 self.held += 1
@@ -94,12 +96,19 @@ class ReceiverNode:
                                acked_seq=self.receiver.delivered)
 
     def keepalive(self) -> None:
-        """Repeat the ack while there is a consumer: after an outage the sender learns at once that the link
-        is back instead of waiting out its backoff."""
+        """Repeat the ack while there is a consumer: after an outage (or while the first batches were held
+        for want of a consumer) the sender learns at once that it can send, instead of waiting out its backoff.
+        For an epoch the receiver has not accepted a batch of yet, the ack repeats the sender's own ack (no
+        progress, it only ends the backoff)."""
         with self.lock:
             ready = self.out_pub is not None and (not self.cfg.require_consumer
                                                   or self.out_pub.get_num_connections() > 0)
-            ack = self.ack() if ready and self.receiver.epoch else None
+            epoch, sender_ack = self.seen
+            ack = None
+            if ready and epoch and epoch not in self.receiver.retired and epoch != self.receiver.epoch:
+                ack = StoreForwardAck(stream=self.cfg.common.stream, epoch=epoch, acked_seq=sender_ack)
+            elif ready and self.receiver.epoch:
+                ack = self.ack()
         if ack is not None:
             self.ack_pub.publish(ack)
 

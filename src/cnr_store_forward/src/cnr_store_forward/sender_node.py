@@ -22,7 +22,6 @@ from cnr_store_forward.core.queue import DiskQueue, QueueError, Record
 from cnr_store_forward.core.sender import Sender
 from cnr_store_forward.wire import RELAY_HEADER, ros_time
 
-DATA_QUEUE = 10         # batches rospy may hold per connection while the link is slow (older ones dropped)
 
 
 class SenderNode:
@@ -51,7 +50,10 @@ class SenderNode:
         self.reported_full = False
         meta = self.queue.meta
         self.type: Tuple[str, str] = (meta.get('type', ''), meta.get('md5sum', ''))
-        self.data_pub = rospy.Publisher(cfg.common.topic('data'), StoreForwardBatch, queue_size=DATA_QUEUE)
+        # rospy holds up to a window of batches per connection while the link is slow, then drops the oldest
+        # (sent again after the ack timeout)
+        window_batches = -(-cfg.settings.window // cfg.settings.batch_records)
+        self.data_pub = rospy.Publisher(cfg.common.topic('data'), StoreForwardBatch, queue_size=window_batches + 1)
         self.status_pub = rospy.Publisher('~status', StoreForwardStatus, queue_size=5)
         rospy.Subscriber(cfg.common.topic('ack'), StoreForwardAck, self.on_ack, queue_size=50)
         # unbounded: a message is never dropped before it is on disk
