@@ -31,9 +31,8 @@ class SenderNode:
         self.stop = threading.Event()
         self.failed = ''
         self.closed = False
-        self.queue = DiskQueue(cfg.stream_dir, cfg.max_records, cfg.max_bytes, cfg.segment_bytes, cfg.fsync)
-        r = self.queue.recovery
-        q = self.queue
+        self.queue = q = DiskQueue(cfg.stream_dir, cfg.max_records, cfg.max_bytes, cfg.segment_bytes, cfg.fsync)
+        r = q.recovery
         pending = f'seq {q.acked + 1}..{q.last_seq} unacked' if q.unacked else f'next seq {q.last_seq + 1}'
         rospy.loginfo(f'store_forward sender {cfg.common.stream}: queue {cfg.stream_dir} '
                       f'({"new" if r.created else "reopened"}, epoch {q.epoch}): {r.records} records in '
@@ -63,8 +62,10 @@ class SenderNode:
     def on_input(self, msg: rospy.AnyMsg) -> None:
         header = msg._connection_header
         if RELAY_HEADER in header:
-            self.ignored += 1
-            if self.ignored == 1:
+            with self.lock:
+                self.ignored += 1
+                first = self.ignored == 1
+            if first:
                 rospy.logwarn(f'store_forward sender {self.cfg.common.stream}: ignoring {self.cfg.input_topic} from '
                               f'{header.get("callerid")}, the receiver of stream {header[RELAY_HEADER]}: relayed '
                               f'messages are never relayed again (is the topic bridged back to this master?)')
