@@ -23,7 +23,8 @@ from cnr_maps.mapio import load_map
 from cnr_maps.measurements import Measurement, write_tsv
 from cnr_mission.core.report import CellSummary, path_length, render_png, write_summary
 from cnr_mission.core.scenario import read_mission
-from cnr_msgs.msg import BatteryEnergy, CellStates, Hotspot, MergedMeasurement, MfgActivity, NetworkProfile, SearchState
+from cnr_msgs.msg import (BatteryEnergy, CellStates, Hotspot, MergedMeasurement, MfgActivity, NetworkProfile, SearchState,
+                          StoreForwardStatus)
 from cnr_msgs.srv import GetMeasurements
 from cnr_params import ConfigError
 from cnr_params.ros import init_node, private_section
@@ -43,6 +44,12 @@ class MissionMonitor:
         self.placement = p.string('placement')
         profile_topic = p.string('network_profile_topic')     # '' on one master: no network to profile
         self.profiles: List[Tuple[float, ...]] = []
+        relay_topic = p.string('relay_status_topic')           # '' when no store-and-forward stream runs
+        self.relay_drain_timeout = p.number('relay_drain_timeout', nonnegative=True)
+        self.relay: Optional[StoreForwardStatus] = None
+        if relay_topic:
+            rospy.Subscriber(relay_topic, StoreForwardStatus, lambda m: setattr(self, 'relay', m), queue_size=2)
+        self.relay_expected = bool(relay_topic)
         self.lock = threading.Lock()
         self.trajectory: List[Tuple[float, float]] = []
         self.battery_first: Optional[BatteryState] = None
@@ -131,6 +138,22 @@ class MissionMonitor:
             time.sleep(0.1)
         return False
 
+    def drain_relay(self) -> None:
+        """Nothing made on the robot is left behind: wait (bounded) until the store-and-forward sender's queue
+        is empty, i.e. the cloud acknowledged every measurement."""
+        if not self.relay_expected:
+            return
+        self._say(f'waiting up to {self.relay_drain_timeout:g} s for the store-and-forward queue to drain')
+        deadline = time.monotonic() + self.relay_drain_timeout
+        while not rospy.is_shutdown() and time.monotonic() < deadline:
+            r = self.relay
+            if r is not None and r.queued == 0 and r.acked_seq == r.last_seq:
+                self._say(f'store-and-forward drained: {r.appended} stored, all acknowledged')
+                return
+            time.sleep(0.2)
+        r = self.relay
+        self._say('store-and-forward NOT drained: ' + ('no status' if r is None else f'{r.queued} still queued'))
+
     def write_report(self, found: bool) -> str:
         os.makedirs(self.report_dir, exist_ok=True)
         records: List[Measurement] = []
@@ -178,6 +201,10 @@ class MissionMonitor:
                 k: getattr(self.energy_last, k) - getattr(self.energy_first, k)
                 for k in ('idle', 'motors', 'cpu', 'radio', 'total', 'cpu_seconds', 'radio_bytes')},
             measurements_taken=len(records) or self.measurements,
+            measurements_published_on_robot=self.measurements,
+            store_and_forward=None if self.relay is None else {
+                k: getattr(self.relay, k) for k in ('stream', 'epoch', 'last_seq', 'acked_seq', 'queued', 'appended',
+                                                    'sent', 'resent', 'timeouts', 'full', 'rejected')},
             network_profile=None if not profiles else dict(
                 file='network_profile.tsv', samples=len(profiles),
                 alive_fraction=sum(r[1] for r in profiles) / len(profiles)),
@@ -214,6 +241,7 @@ def main() -> None:
     found = mon.wait()
     if rospy.is_shutdown():
         return
+    mon.drain_relay()
     path = mon.write_report(found)
     print(f'[mission] report written to {path}', flush=True)
     rospy.signal_shutdown('mission over')

@@ -39,7 +39,7 @@ import yaml
 from cnr_bringup.placement import Placement, launch_args, load_catalog, describe
 from cnr_harness import Proc
 from cnr_mission.core.report import write_summary
-from cnr_params.config import EXIT_CONFIG, ConfigError, load_yaml
+from cnr_params.config import EXIT_CONFIG, ConfigError, Section, load_yaml
 from cnr_testbed import cpucap
 from cnr_testbed.api import Testbed, TestbedError
 from cnr_testbed.rosside import BRIDGE_PORT, RosSide
@@ -71,6 +71,8 @@ class TwoHostMission:
         self.log_dir = os.path.join(report_dir, 'logs')
         self.port = port
         self.link, self.trace, self.link_map = link, trace, link_map
+        settings = Section.from_file(os.path.join(ws_config, 'two_host.yaml')).section('two_host')
+        self.relay_drain_timeout = settings.number('relay_drain_timeout', nonnegative=True)
         self.testbed = Testbed(os.path.join(ws_config, 'testbed.yaml'))
         self.owns_testbed = False
         self.robot: Optional[RosSide] = None
@@ -165,13 +167,22 @@ class TwoHostMission:
                                            'real_time_factor:=1', f'report_dir:={self.report_dir}',
                                            f'placement:={self.placement.name}',
                                            f'battery_cpu_cgroup:={self.testbed.robot_cgroup}',
-                                           f'battery_interface:={self.testbed.cfg.robot_dev}'],
+                                           f'battery_interface:={self.testbed.cfg.robot_dev}',
+                                           'relay_status_topic:=' + ('/store_forward_sender/status'
+                                                                     if self.placement.relayed() else ''),
+                                           f'relay_drain_timeout:={self.relay_drain_timeout}'],
                      until='mission_monitor')
         for side, peer in ((self.robot, self.cloud), (self.cloud, self.robot)):
             host_args = ['cnr_mission', 'host.launch', f'host:={side.side}', *common,
                          f'bridge_config:={self._bridge_config(side, peer)}', f'secret_file:={secret}',
                          f'network_monitor_overlay:={self._monitor_overlay(side, peer)}',
                          *launch_args(self.placement, side.side)]
+            relayed = self.placement.relayed()
+            if len(relayed) > 1:
+                raise ConfigError(self.placement.name, 'store_forward', 'the two-host launch relays one stream at most')
+            for st in relayed:
+                host_args += [f'relay_stream:={st.stream}', f'relay_topic:={st.topic}',
+                              f'relay_dir:={os.path.join(self.report_dir, "store_forward_" + side.side)}']
             if side.side == 'robot':
                 host_args.append('kestrel_driver:=true')
             elif self.placement.host('move_base') == 'cloud':
@@ -312,8 +323,12 @@ def main(argv: Optional[List[str]] = None) -> int:
               file=sys.stderr)
         return EXIT_CONFIG
     print(describe(placement), flush=True)
-    mission = TwoHostMission(args.config_dir, args.scenario, args.map, args.start, placement, args.report_dir,
-                             args.port, link, args.trace, args.link_map)
+    try:
+        mission = TwoHostMission(args.config_dir, args.scenario, args.map, args.start, placement, args.report_dir,
+                                 args.port, link, args.trace, args.link_map)
+    except ConfigError as exc:
+        print(f'two_host_mission: {exc}', file=sys.stderr)
+        return EXIT_CONFIG
     signal.signal(signal.SIGINT, _on_signal)
     signal.signal(signal.SIGTERM, _on_signal)
     status = 1

@@ -43,6 +43,10 @@ class ManagerNode:
         rospy.loginfo(f'{len(self.grid)} mapcells ({self.grid.cols} x {self.grid.rows} of {self.grid.cell_size:g} m); '
                       f'{self.book.count} stored measurements reloaded from {p.store}')
         self.outside = 0
+        # a measurement is stored once: one whose stamp is not newer than the newest stored one is a duplicate
+        # (a store-and-forward receiver that crashed between delivering and saving its mark delivers again)
+        self.newest = max((m.time for m in self.book.measurements()), default=-math.inf)
+        self.duplicates = 0
         self.pub = rospy.Publisher('cell_states', CellStates, queue_size=1, latch=True)
         self.measurement_pub = rospy.Publisher('mapcell_measurements', MergedMeasurement, queue_size=100)
         self._dirty = True
@@ -73,6 +77,12 @@ class ManagerNode:
             rospy.logwarn_throttle(5.0, f'ignored a merged measurement with non-finite values {values}')
             return
         with self.lock:
+            if msg.header.stamp.to_sec() <= self.newest:
+                self.duplicates += 1
+                rospy.logwarn_throttle(5.0, f'ignored {self.duplicates} measurement(s) not newer than the newest '
+                                            f'stored one (duplicates or out of order)')
+                return
+            self.newest = msg.header.stamp.to_sec()
             m = self.book.new_measurement(msg.header.stamp.to_sec(), msg.x, msg.y, msg.temperature,
                                           msg.pose_stamp.to_sec())
             if m is None:
