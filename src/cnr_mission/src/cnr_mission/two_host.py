@@ -206,6 +206,8 @@ class TwoHostMission:
             status = world.poll()
             for name, proc in self.procs.items():
                 rc = proc.poll()
+                if name == 'trace' and rc == 0:       # a trace that has played to its end
+                    continue
                 if name != 'world' and rc is not None and status is None:
                     print(f'[two-host] {name} ended with status {rc} (log: {proc.log_path})', flush=True)
                     status = EXIT_CONFIG if rc == EXIT_CONFIG else 1

@@ -31,6 +31,9 @@ from mfg.core.params import MfgParams, read_params
 from mfg.core.search import HotspotSearch
 
 
+_TERMINAL = (GoalStatus.SUCCEEDED, GoalStatus.ABORTED, GoalStatus.REJECTED, GoalStatus.PREEMPTED, GoalStatus.RECALLED)
+
+
 class MfgNode:
     def __init__(self, p: MfgParams) -> None:
         self.p = p
@@ -118,6 +121,10 @@ class MfgNode:
         deadline = rospy.Time.now().to_sec() + self.p.goal_timeout
         while not rospy.is_shutdown():
             if self.client.wait_for_result(rospy.Duration(0.1)):
+                return 'succeeded' if self.client.get_state() == GoalStatus.SUCCEEDED else 'failed'
+            # the server's status list says the goal ended, but its result never came: it was published while
+            # the link was down (results are not latched; the status is repeated) - the goal is over all the same
+            if self.client.get_state() in _TERMINAL:
                 return 'succeeded' if self.client.get_state() == GoalStatus.SUCCEEDED else 'failed'
             if interruptible and self.trigger is not None:
                 self.client.cancel_goal()
