@@ -83,7 +83,12 @@ class DepthCamera:
         self._cast_range = c.max_range * float(self._stretch.max())
         with np.errstate(divide='ignore'):
             floor = np.where(c.row_slope < 0, c.mount_height / -c.row_slope, np.inf)
-        self._floor_depth = floor                                    # (height,) depth at which a row meets the floor
+        self._floor_depth = floor[:, None].astype(np.float32)       # (height, 1) depth at which a row meets the floor
+        # (height, width, 3) point per metre of depth, optical frame: right, down, forward
+        self._rays = np.empty((c.height, c.width, 3), dtype=np.float32)
+        self._rays[..., 0] = -c.column_slope[None, :]
+        self._rays[..., 1] = -c.row_slope[:, None]
+        self._rays[..., 2] = 1.0
         self._buf = np.empty(c.width)
 
     def frame(self, x: float, y: float, yaw: float, circles: Optional[np.ndarray] = None,
@@ -100,11 +105,7 @@ class DepthCamera:
         horizontal = self._buf
         if circles is not None and len(circles):
             horizontal = np.minimum(horizontal, circle_hits(x, y, angles, circles, radii))
-        wall = horizontal / self._stretch                                      # (width,) depth of the column's wall
-        depth = np.minimum(wall[None, :], self._floor_depth[:, None])          # (height, width)
-        depth[~((depth >= c.min_range) & (depth <= c.max_range))] = np.nan
-        out = np.empty((c.height, c.width, 3), dtype=np.float32)
-        out[..., 0] = -c.column_slope[None, :] * depth          # right
-        out[..., 1] = -c.row_slope[:, None] * depth             # down
-        out[..., 2] = depth                                     # forward
-        return out
+        wall = (horizontal / self._stretch).astype(np.float32)                 # (width,) depth of the column's wall
+        depth = np.minimum(wall[None, :], self._floor_depth)                   # (height, width)
+        depth[(depth < c.min_range) | (depth > c.max_range)] = np.nan
+        return self._rays * depth[..., None]
