@@ -1,4 +1,4 @@
-"""Navigation cores without a master: inflation costs, planning on small grids, the DWA controller."""
+"""Navigation cores without a master: inflation costs, planning on small grids, the DWA controller, point clouds."""
 import math
 import os
 from dataclasses import replace
@@ -9,9 +9,10 @@ import pytest
 from cnr_navigation.core.costmap import (INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, GridGeometry, LayeredCostmap,
                                          inflate, inflation_cost_of_distance, scan_to_observation)
 from cnr_navigation.core.dwa import DWAController
-from cnr_navigation.core.geometry import Pose2D
+from cnr_navigation.core.geometry import Pose2D, quaternion_to_matrix
 from cnr_navigation.core.param_files import read_config
 from cnr_navigation.core.planner import GlobalPlanner, PlanningError, PlanningGrid
+from cnr_navigation.core.pointcloud import cloud_to_observation, cloud_xyz
 
 RES = 0.05
 #: the TurtleBot navigation configuration (config/navigation), as the move_base node reads it
@@ -132,6 +133,72 @@ def test_dwa_avoids_an_obstacle_seen_by_the_laser():
         assert res.mode in ('failed', 'stop')
 
 
+def test_cloud_xyz_reads_offsets_padding_and_byte_order():
+    pts = np.arange(18, dtype=np.float64).reshape(6, 3)                # 2 rows x 3 points
+    rec = np.zeros((2, 3), dtype=np.dtype({'names': ['z', 'x', 'y', 'i'], 'formats': ['<f4', '<f4', '<f4', '<u4'],
+                                           'offsets': [0, 4, 8, 12], 'itemsize': 16}))
+    rec['x'], rec['y'], rec['z'] = pts[:, 0].reshape(2, 3), pts[:, 1].reshape(2, 3), pts[:, 2].reshape(2, 3)
+    data = b''.join(row.tobytes() + b'\xff' * 8 for row in rec)      # row_step 56: 8 bytes of row padding
+    fields = {'z': (0, 7), 'x': (4, 7), 'y': (8, 7), 'intensity': (12, 6)}
+    assert np.array_equal(cloud_xyz(data, 3, 2, 16, 56, fields, False), pts)
+    big = np.zeros(6, dtype=[('x', '>f8'), ('y', '>f8'), ('z', '>f8')])
+    big['x'], big['y'], big['z'] = pts.T
+    assert np.array_equal(cloud_xyz(big.tobytes(), 6, 1, 24, 144, {'x': (0, 8), 'y': (8, 8), 'z': (16, 8)}, True), pts)
+    with pytest.raises(ValueError, match="no 'z' field"):
+        cloud_xyz(data, 3, 2, 16, 56, {'x': (4, 7), 'y': (8, 7)}, False)
+    with pytest.raises(ValueError, match='bytes of data'):
+        cloud_xyz(data[:-1], 3, 2, 16, 56, fields, False)
+
+
+#: camera frame (x forward, z up) -> optical frame (x right, y down, z forward), as the simulator's static tf
+OPTICAL = quaternion_to_matrix((-0.5, 0.5, -0.5, 0.5))
+
+
+def depth_source(**values):
+    return replace(next(s for s in NAV.local_costmap.sources if s.name == 'depth').layer, **values)
+
+
+def test_cloud_to_observation_filters_heights_and_transforms():
+    """A camera 0.3 m up at (1, 2) facing +y: points (optical frame) are kept by height and moved to the costmap."""
+    yaw90 = quaternion_to_matrix((0.0, 0.0, math.sin(math.pi / 4), math.cos(math.pi / 4)))
+    rotation, translation = yaw90 @ OPTICAL, np.array([1.0, 2.0, 0.3])
+    points = np.array([[0.0, 0.0, 2.0],          # 2 m ahead at the camera's height: marks (1, 4)
+                       [0.0, -0.2, 2.0],         # same column, 0.5 m up: marks the same cell, same clearing ray
+                       [0.0, 0.3, 1.5],          # the floor (z = 0): dropped
+                       [0.0, -0.5, 2.0],         # 0.8 m up, above max_obstacle_height 0.6: dropped
+                       [np.nan, np.nan, np.nan],  # no depth
+                       [-1.0, 0.0, 3.5]])        # 3.64 m away, 1 m to the left: beyond obstacle_range, clears only
+    cfg = depth_source()
+    assert (cfg.min_obstacle_height, cfg.max_obstacle_height, cfg.obstacle_range, cfg.raytrace_range) == \
+        (0.05, 0.6, 2.5, 3.0)                                            # config/navigation/costmap_common.yaml
+    obs = cloud_to_observation(points, rotation, translation, cfg, 0.05)
+    assert (obs.sensor_x, obs.sensor_y, obs.sensor_z) == (1.0, 2.0, 0.3)
+    assert np.allclose(obs.mark_x, [1.0, 1.0]) and np.allclose(obs.mark_y, [4.0, 4.0])
+    assert obs.clear_x.size == 2                                         # one ray per direction
+    order = np.argsort(obs.clear_x)
+    far = math.hypot(1.0, 3.5)
+    assert np.allclose(obs.clear_x[order], [1.0 - 3.0 / far, 1.0]) and \
+        np.allclose(obs.clear_y[order], [2.0 + 3.0 * 3.5 / far, 4.0])    # cut at raytrace_range
+    assert list(obs.hit[order]) == [False, True]
+    none = cloud_to_observation(points, rotation, translation, replace(cfg, marking=False, clearing=False), 0.05)
+    assert none.mark_x.size == 0 and none.clear_x.size == 0
+
+
+def test_local_costmap_marks_and_clears_with_a_depth_cloud():
+    """An organised cloud of a wall 1.5 m ahead: the wall's cells become lethal, the cells before it free."""
+    cm = LayeredCostmap(replace(LOCAL, obstacle_layer=replace(LOCAL.obstacle_layer, track_unknown_space=True)), 'local')
+    cols, rows = np.meshgrid(np.linspace(-0.5, 0.5, 80), np.linspace(-0.4, 0.3, 60))
+    depth = np.full(cols.shape, 1.5)
+    cloud = np.stack([cols * depth, rows * depth, depth], axis=-1).reshape(-1, 3).astype(np.float32)
+    data = cloud.tobytes()
+    points = cloud_xyz(data, 80, 60, 12, 960, {'x': (0, 7), 'y': (4, 7), 'z': (8, 7)}, False)
+    obs = cloud_to_observation(points, OPTICAL, np.array([0.0, 0.0, 0.287]), depth_source(), cm.cfg.resolution)
+    cm.update(Pose2D(0.0, 0.0, 0.0), [obs], stamp=0.0)
+    assert cm.cost_at(1.52, 0.0) == LETHAL_OBSTACLE and cm.cost_at(1.52, 0.4) == LETHAL_OBSTACLE
+    assert cm.obstacles.grid[cm.geometry.world_to_cell(1.0, 0.0)] == 0            # seen free
+    assert cm.obstacles.grid[cm.geometry.world_to_cell(1.0, 1.5)] == 255          # outside the view: unknown
+
+
 def test_readme_parameter_tables_are_the_generated_ones(workspace):
     from cnr_navigation.core.param_docs import markdown_tables
     with open(f'{workspace}/src/cnr_navigation/README.md') as f:
@@ -148,6 +215,12 @@ def test_navigation_parameters_come_from_config_and_a_missing_one_is_named(works
     assert params.move_base.controller_frequency == 5.0 and params.dwa.sim_time == 1.0
     assert params.local_costmap.config.width == 4.0 and params.clearing_radius == 0.46
     assert params.global_costmap.map_topic == 'map' and params.local_costmap.sources[0].topic == 'scan'
+    for costmap in (params.global_costmap, params.local_costmap):      # both costmaps use the Kinect's two streams
+        assert [(s.name, s.data_type, s.topic) for s in costmap.sources] == \
+            [('scan', 'LaserScan', 'scan'), ('depth', 'PointCloud2', 'camera/depth/points')]
+    with pytest.raises(ConfigError, match="depth: data_type: unsupported 'Image'"):
+        read_navigation_params(TreeReader(dict(tree, **{'/move_base/global_costmap/obstacle_layer/depth/data_type':
+                                                        'Image'})), '/move_base')
     for name, message in (('/move_base/DWAPlannerROS/sim_time', '/move_base/DWAPlannerROS: sim_time: missing'),
                           ('/move_base/global_costmap/static_layer/map_topic',
                            '/move_base/global_costmap/static_layer: map_topic: missing'),

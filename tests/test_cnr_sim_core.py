@@ -1,4 +1,4 @@
-"""Simulator cores without a master: ray casting, kinematics and limits, collisions, battery."""
+"""Simulator cores without a master: ray casting, depth camera, kinematics and limits, collisions, battery."""
 import dataclasses
 import math
 import os
@@ -8,6 +8,7 @@ import pytest
 
 from cnr_params import ConfigError, Section
 from cnr_sim.core.battery import BatteryConfig, BatteryModel, CpuMeter
+from cnr_sim.core.depth_camera import DepthCamera
 from cnr_maps.mapio import OccupancyMap
 from cnr_maps.pose import Pose2D
 from cnr_sim.core.kinematics import DiffDrive, integrate
@@ -15,7 +16,7 @@ from cnr_sim.core.laser import FakeLaser
 from cnr_sim.core.obstacles import MovingObstacle, obstacles_from_config
 from cnr_sim.core.raycast import cast_rays, circle_hits
 from cnr_sim.core.world import World
-from cnr_sim.params import config_section, read_laser, read_limits, read_world
+from cnr_sim.params import config_section, read_depth_camera, read_laser, read_limits, read_world
 
 RES = 0.05
 #: the simulator's private namespace as simulator.launch loads it from config/
@@ -71,6 +72,62 @@ def test_fake_laser_conventions():
     assert np.isnan(close[320])
     with_person = laser.scan(5.0, 5.0, 0.0, np.array([[6.0, 5.0]]), np.array([0.25]))
     assert with_person[320] == pytest.approx(0.75, abs=1e-6)
+
+
+def test_depth_camera_sees_a_wall_at_its_distance():
+    """A wall square to the optical axis: every wall pixel has the same depth; lower rows see the floor."""
+    cfg = read_depth_camera(SIM)                                        # config/depth_camera.yaml (Kinect)
+    assert (cfg.width, cfg.height, cfg.min_range, cfg.max_range) == (80, 60, 0.45, 4.0)
+    cam = DepthCamera(cfg, box_map(wall_col=60).data >= 50, RES, (0, 0))
+    frame = cam.frame(1.013, 5.021, 0.0)                                # wall x = 3.0: 1.987 m ahead
+    assert frame.shape == (60, 80, 3) and frame.dtype == np.float32
+    assert len(frame.tobytes()) == cfg.frame_bytes == 80 * 60 * 12     # x, y, z float32 per point
+    x, y, z = frame[..., 0], frame[..., 1], frame[..., 2]              # optical frame: right, down, forward
+    floor = np.isclose(y, cfg.mount_height, atol=1e-6)                  # pixels seeing the floor (z = 0)
+    wall = ~floor
+    assert floor.any() and wall.any() and not np.isnan(frame).any()
+    assert np.allclose(z[wall], 1.987, atol=1e-5)
+    # the floor is seen below the wall's foot: floor pixels are the bottom rows, nearer than the wall
+    assert np.all(z[floor] < 1.987) and floor[-1].all() and not floor[0].any()
+    # field of view: pixel centres span (n - 1) / n of the image; their edges span 57 x 43 deg
+    half_h = np.arctan(np.abs(x[wall] / z[wall]).max()) * 2
+    assert math.degrees(half_h) == pytest.approx(2 * math.degrees(math.atan(math.tan(math.radians(28.5)) * 79 / 80)),
+                                                 abs=1e-3)
+    top = -y[0, 0] / z[0, 0]                                             # tan of the top row's elevation
+    assert math.degrees(2 * math.atan(top * 60 / 59)) == pytest.approx(43.0, abs=1e-3)
+    assert np.isnan(cam.frame(2.8, 5.0, 0.0)[..., 2][:20]).all()        # wall 0.2 m ahead: below min_range
+    far = DepthCamera(cfg, box_map().data >= 50, RES, (0, 0)).frame(7.0, 5.0, math.pi)
+    assert np.isnan(far[:30]).all() and not np.isnan(far[-1]).any()    # border 7 m away: no depth; floor seen
+    person = cam.frame(1.013, 5.0, 0.0, np.array([[2.0, 5.0]]), np.array([0.25]))
+    assert person[20, 40, 2] == pytest.approx(2.0 - 0.25 - 1.013, abs=0.01)
+
+
+def test_depth_frames_at_the_configured_rate():
+    w = make_world(depth=read_depth_camera(SIM))                        # 7.4 Hz, 50 Hz steps
+    frames = []
+    while w.time < 100.0:
+        w.step()
+        if w.depth_due():
+            frames.append(w.time)
+            assert w.depth_frame().shape == (60, 80, 3)
+    assert len(frames) == pytest.approx(740, abs=1)
+    assert np.diff(frames).max() <= 1 / 7.4 + 0.02 + 1e-9
+    assert not make_world().depth_due()                                 # no camera configured
+
+
+def test_depth_camera_parameters():
+    from cnr_sim.params import read_params
+    data = dict(SIM.data, map_file='corridor.yaml', real_time_factor=1.0, initial_pose=[0.5, 0.0, 0.0])
+    p = read_params(Section(data, '/simulator'))
+    assert p.depth_enabled and p.depth_frame == 'camera_depth_optical_frame'
+    assert p.depth.mount_height == 0.287                                # the laser's (the Kinect's) height
+    for key in ('rate', 'enabled', 'fov_v_deg'):
+        depth = {k: v for k, v in data['depth_camera'].items() if k != key}
+        with pytest.raises(ConfigError, match=f'/simulator: depth_camera.{key}: missing'):
+            read_params(Section(dict(data, depth_camera=depth), '/simulator'))
+    with pytest.raises(ConfigError, match='depth_camera.frame_id: must differ'):
+        read_params(Section(dict(data, depth_camera=dict(data['depth_camera'], frame_id='camera_depth_frame')),
+                            '/simulator'))
 
 
 def test_velocity_limits_acceleration_and_watchdog():

@@ -1,10 +1,10 @@
-"""Navigation benchmark: global plan across the data-center hall and one control-loop cycle.
+"""Navigation benchmark: global plan across the data-center hall, one control-loop cycle, one depth frame.
 
     /usr/bin/python3 -m cnr_navigation.bench [--out bench_results/navigation.json]
 
 Uses the TurtleBot configuration as the move_base node reads it from config/navigation (robot radius
-0.20 m, inflation 0.5 m, k 5, DWA with 6 x 20 samples over 1.0 s) and 640-beam scans. Prints one line
-per figure and writes JSON.
+0.20 m, inflation 0.5 m, k 5, DWA with 6 x 20 samples over 1.0 s), 640-beam scans and 80 x 60 depth clouds
+(the ``depth`` source). Prints one line per figure and writes JSON.
 """
 from __future__ import annotations
 
@@ -19,9 +19,10 @@ import numpy as np
 
 from cnr_navigation.core.costmap import GridGeometry, LayeredCostmap, scan_to_observation
 from cnr_navigation.core.dwa import DWAController
-from cnr_navigation.core.geometry import Pose2D
+from cnr_navigation.core.geometry import Pose2D, quaternion_to_matrix
 from cnr_navigation.core.param_files import read_config
 from cnr_navigation.core.planner import GlobalPlanner, PlanningGrid
+from cnr_navigation.core.pointcloud import cloud_to_observation, cloud_xyz
 
 WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
 
@@ -71,6 +72,31 @@ def control_times(n: int) -> list:
     return times
 
 
+def depth_times(n: int) -> list:
+    """One 80 x 60 organised cloud (float32 x, y, z, optical frame) into the local costmap: parse, transform,
+    filter, mark and clear, update (what move_base does per depth frame and costmap)."""
+    nav = read_config(os.path.join(WS, 'config'))
+    cfg = nav.local_costmap.config
+    source = next(s for s in nav.local_costmap.sources if s.data_type == 'PointCloud2')
+    cm = LayeredCostmap(cfg, 'local_costmap')
+    optical = quaternion_to_matrix((-0.5, 0.5, -0.5, 0.5))
+    cols, rows = np.meshgrid(np.linspace(-0.54, 0.54, 80), np.linspace(-0.39, 0.39, 60))
+    rng = np.random.default_rng(0)
+    fields = {'x': (0, 7), 'y': (4, 7), 'z': (8, 7)}
+    times = []
+    x = 0.0
+    for _ in range(n):
+        depth = np.repeat(1.0 + rng.uniform(0, 3.0, (1, 80)), 60, axis=0)    # a cluttered scene, one wall per column
+        data = np.stack([cols * depth, rows * depth, depth], axis=-1).astype(np.float32).tobytes()
+        t0 = time.perf_counter()
+        obs = cloud_to_observation(cloud_xyz(data, 80, 60, 12, 960, fields, False), optical,
+                                   np.array([x - 0.087, 0.0, 0.287]), source.layer, cfg.resolution)
+        cm.update(Pose2D(x, 0.0, 0.0), [obs], stamp=0.0)
+        times.append((time.perf_counter() - t0) * 1e3)
+        x += 0.08
+    return times
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('--out', default=os.path.join(WS, 'bench_results', 'navigation.json'))
@@ -89,6 +115,8 @@ def main() -> None:
     report('global plan across the data-center hall', plan_times(args.runs), 'ms', '<= 150')
     control_times(3)
     report('control loop (local costmap + DWA, 640 beams)', control_times(args.runs * 10), 'ms', '<= 10')
+    depth_times(3)
+    report('depth frame into the local costmap (80 x 60)', depth_times(args.runs * 10), 'ms', '-')
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     with open(args.out, 'w') as f:
         json.dump(results, f, indent=1)

@@ -1,5 +1,5 @@
-"""Costmap2DROS look-alike: a :class:`LayeredCostmap` fed by ``map`` and laser scans, published as
-nav_msgs/OccupancyGrid, with dynamic_reconfigure servers for the costmap and each layer."""
+"""Costmap2DROS look-alike: a :class:`LayeredCostmap` fed by ``map``, laser scans and point clouds, published
+as nav_msgs/OccupancyGrid, with dynamic_reconfigure servers for the costmap and each layer."""
 from __future__ import annotations
 
 import dataclasses
@@ -14,28 +14,33 @@ from dynamic_reconfigure.server import Server as ReconfigureServer
 from geometry_msgs.msg import PolygonStamped
 from map_msgs.msg import OccupancyGridUpdate
 from nav_msgs.msg import OccupancyGrid
-from sensor_msgs.msg import LaserScan
+from sensor_msgs.msg import LaserScan, PointCloud2
 
 from cnr_navigation.cfg import Costmap2DConfig, GenericPluginConfig, InflationPluginConfig, ObstaclePluginConfig
 from cnr_navigation.core.costmap import (INSCRIBED_INFLATED_OBSTACLE, GridGeometry, LayeredCostmap, Observation,
                                          circle_footprint, occupancy_values, scan_to_observation)
 from cnr_navigation.core.geometry import IDENTITY, Pose2D
 from cnr_navigation.core.param_reader import CostmapParams, SourceParams, parse_footprint
+from cnr_navigation.core.pointcloud import cloud_to_observation, cloud_xyz
 from cnr_navigation.core.planner import PlanningGrid
 from cnr_navigation.ros_io import TfHelper, footprint_msg
 
 
+#: message class of each observation source ``data_type`` (param_tables.SOURCE_DATA_TYPES)
+MESSAGE_TYPES = {'LaserScan': LaserScan, 'PointCloud2': PointCloud2}
+
+
 class _Source:
-    """One observation source: a message_filters cache of its scans."""
+    """One observation source: a message_filters cache of its scans or clouds."""
 
     def __init__(self, params: SourceParams) -> None:
         self.params = params
-        self.subscriber = message_filters.Subscriber(params.topic, LaserScan, queue_size=5)
+        self.subscriber = message_filters.Subscriber(params.topic, MESSAGE_TYPES[params.data_type], queue_size=5)
         self.cache = message_filters.Cache(self.subscriber, cache_size=20)
-        self.next_stamp = rospy.Time(0)          # scans at or after this stamp are new
+        self.next_stamp = rospy.Time(0)          # messages at or after this stamp are new
         self.max_obstacle_height = params.layer.max_obstacle_height   # as configured for the source
 
-    def new_scans(self) -> List[LaserScan]:
+    def new_scans(self) -> List:
         msgs = list(zip(list(self.cache.cache_msgs), list(self.cache.cache_times)))
         return [m for m, t in msgs if t >= self.next_stamp]
 
@@ -114,21 +119,47 @@ class CostmapROS:
 
     def _observations(self) -> List[Observation]:
         out: List[Observation] = []
-        frame = self.costmap.cfg.global_frame
         for src in self.sources:
-            for scan in src.new_scans():
-                sensor_frame = src.params.sensor_frame or scan.header.frame_id
-                found = self.tf.lookup(frame, sensor_frame, scan.header.stamp)
-                if found is None:
-                    if (rospy.Time.now() - scan.header.stamp).to_sec() < 1.0:
-                        break                      # tf not there yet: retry this scan next cycle
-                    src.next_stamp = scan.header.stamp + rospy.Duration(0, 1)
-                    continue
-                sensor, z = found
-                out.append(scan_to_observation(scan.ranges, scan.angle_min, scan.angle_increment, scan.range_min,
-                                               scan.range_max, sensor, z, src.params.layer))
-                src.next_stamp = scan.header.stamp + rospy.Duration(0, 1)
+            convert = self._cloud_observation if src.params.data_type == 'PointCloud2' else self._scan_observation
+            for msg in src.new_scans():
+                try:
+                    obs = convert(src.params, msg)
+                except ValueError as exc:          # a malformed cloud: skip it
+                    rospy.logwarn_throttle(5.0, f'{self.name}: {src.params.name}: dropping a message: {exc}')
+                    obs = []
+                if obs is None:
+                    if (rospy.Time.now() - msg.header.stamp).to_sec() < 1.0:
+                        break                      # tf not there yet: retry this message next cycle
+                else:
+                    out += obs
+                src.next_stamp = msg.header.stamp + rospy.Duration(0, 1)
         return out
+
+    def _scan_observation(self, params: SourceParams, scan: LaserScan) -> Optional[List[Observation]]:
+        """The scan as an observation in the costmap frame; None while its tf is not available."""
+        found = self.tf.lookup(self.costmap.cfg.global_frame, params.sensor_frame or scan.header.frame_id,
+                               scan.header.stamp)
+        if found is None:
+            return None
+        sensor, z = found
+        return [scan_to_observation(scan.ranges, scan.angle_min, scan.angle_increment, scan.range_min,
+                                    scan.range_max, sensor, z, params.layer)]
+
+    def _cloud_observation(self, params: SourceParams, cloud: PointCloud2) -> Optional[List[Observation]]:
+        """The cloud transformed at its stamp into the costmap frame; None while its tf is not available."""
+        frame = self.costmap.cfg.global_frame
+        found = self.tf.lookup_matrix(frame, cloud.header.frame_id, cloud.header.stamp)
+        origin = None
+        if found is not None and params.sensor_frame and params.sensor_frame != cloud.header.frame_id:
+            sensor = self.tf.lookup_matrix(frame, params.sensor_frame, cloud.header.stamp)
+            if sensor is None:
+                return None
+            origin = sensor[1]
+        if found is None:
+            return None
+        points = cloud_xyz(cloud.data, cloud.width, cloud.height, cloud.point_step, cloud.row_step,
+                           {f.name: (f.offset, f.datatype) for f in cloud.fields}, cloud.is_bigendian)
+        return [cloud_to_observation(points, found[0], found[1], params.layer, self.costmap.cfg.resolution, origin)]
 
     def sensors_current(self) -> bool:
         """costmap_2d's ``isCurrent``: every source with an expected rate sent a scan recently."""

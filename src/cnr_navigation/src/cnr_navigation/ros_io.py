@@ -13,7 +13,7 @@ from geometry_msgs.msg import Point32, PolygonStamped, PoseStamped, Quaternion, 
 from nav_msgs.msg import Path
 
 from cnr_navigation.core.param_reader import missing
-from cnr_navigation.core.geometry import Pose2D, quaternion_to_yaw, yaw_to_quaternion
+from cnr_navigation.core.geometry import Pose2D, quaternion_to_matrix, quaternion_to_yaw, yaw_to_quaternion
 
 
 class RosParamReader:
@@ -66,6 +66,12 @@ def transform_to_2d(t: TransformStamped) -> Tuple[Pose2D, float]:
     return Pose2D(tr.x, tr.y, quaternion_to_yaw((q.x, q.y, q.z, q.w))), tr.z
 
 
+def transform_to_matrix(t: TransformStamped) -> Tuple[np.ndarray, np.ndarray]:
+    """A transform as a (3, 3) rotation matrix and a (3,) translation [m]."""
+    tr, q = t.transform.translation, t.transform.rotation
+    return quaternion_to_matrix((q.x, q.y, q.z, q.w)), np.array([tr.x, tr.y, tr.z])
+
+
 def pose_stamped(pose: Pose2D, frame: str, stamp: rospy.Time) -> PoseStamped:
     msg = PoseStamped()
     msg.header.frame_id = frame
@@ -100,6 +106,20 @@ class TfHelper:
     def __init__(self, buffer: tf2_ros.Buffer) -> None:
         self.buffer = buffer
 
+    def _transform(self, target: str, source: str, stamp: Optional[rospy.Time]) -> Optional[TransformStamped]:
+        try:
+            return self.buffer.lookup_transform(target, source, stamp or rospy.Time(0))
+        except (tf2_ros.LookupException, tf2_ros.ConnectivityException, tf2_ros.ExtrapolationException) as exc:
+            if stamp is None:
+                rospy.logwarn_throttle(5.0, f'tf {target} <- {source} not available: {exc}')
+            return None
+
+    def lookup_matrix(self, target: str, source: str,
+                      stamp: Optional[rospy.Time] = None) -> Optional[Tuple[np.ndarray, np.ndarray]]:
+        """Rotation matrix and translation of ``source`` in ``target`` at ``stamp`` (latest if None)."""
+        t = self._transform(target, source, stamp)
+        return transform_to_matrix(t) if t is not None else None
+
     def lookup(self, target: str, source: str, stamp: Optional[rospy.Time] = None,
                tolerance: Optional[float] = None) -> Optional[Tuple[Pose2D, float]]:
         """Pose of ``source`` in ``target`` (and its z) at ``stamp`` (latest if None).
@@ -107,11 +127,8 @@ class TfHelper:
         With ``tolerance`` [s], a latest transform older than that is refused, as costmap_2d's
         ``getRobotPose`` does.
         """
-        try:
-            t = self.buffer.lookup_transform(target, source, stamp or rospy.Time(0))
-        except (tf2_ros.LookupException, tf2_ros.ConnectivityException, tf2_ros.ExtrapolationException) as exc:
-            if stamp is None:
-                rospy.logwarn_throttle(5.0, f'tf {target} <- {source} not available: {exc}')
+        t = self._transform(target, source, stamp)
+        if t is None:
             return None
         if tolerance is not None and tolerance > 0 and stamp is None:
             age = (rospy.Time.now() - t.header.stamp).to_sec()

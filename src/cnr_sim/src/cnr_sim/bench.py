@@ -1,4 +1,4 @@
-"""Simulator benchmark: core speed without ROS, time per laser scan, achieved real-time factor with ROS I/O.
+"""Simulator benchmark: core speed without ROS, time per laser scan and per depth frame, real-time factor with ROS I/O.
 
     /usr/bin/python3 -m cnr_sim.bench [--out bench_results/sim.json] [--sim-seconds 600]
 
@@ -17,19 +17,21 @@ from cnr_harness import RosMaster, wait_until
 from cnr_maps.mapio import load_map
 from cnr_maps.pose import Pose2D
 from cnr_sim.core.world import World
-from cnr_sim.params import config_section, read_laser, read_limits, read_world
+from cnr_sim.params import config_section, read_depth_camera, read_laser, read_limits, read_world
 
 WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
 
 
 def turtlebot_world(map_yaml: str, start: Pose2D) -> World:
-    """The simulated TurtleBot 2 as config/ describes it (robot.yaml, laser.yaml)."""
+    """The simulated TurtleBot 2 as config/ describes it (robot.yaml, laser.yaml, depth_camera.yaml)."""
     sim = config_section(os.path.join(WS, 'config'))
-    return World(load_map(map_yaml), read_limits(sim), read_laser(sim), read_world(sim), start)
+    return World(load_map(map_yaml), read_limits(sim), read_laser(sim), read_world(sim), start,
+                 depth=read_depth_camera(sim))
 
 
 def core_rtf(map_yaml: str, start: Pose2D, sim_seconds: float) -> tuple:
-    """Real-time multiple of the world (50 Hz steps, 640-beam laser at 10 Hz, a driving robot)."""
+    """Real-time multiple of the world (50 Hz steps, 640-beam laser at 10 Hz, 80 x 60 depth at 7.4 Hz, a driving
+    robot)."""
     world = turtlebot_world(map_yaml, start)
     world.scan()                                     # compile / warm up
     steps = int(sim_seconds / world.config.step)
@@ -43,6 +45,8 @@ def core_rtf(map_yaml: str, start: Pose2D, sim_seconds: float) -> tuple:
         if world.scan_due():
             world.scan()
             scans += 1
+        if world.depth_due():
+            world.depth_frame()
     wall = time.perf_counter() - t0
     return sim_seconds / wall, steps / wall, scans
 
@@ -53,6 +57,15 @@ def scan_time(map_yaml: str, start: Pose2D, n: int = 2000) -> float:
     t0 = time.perf_counter()
     for _ in range(n):
         world.scan()
+    return (time.perf_counter() - t0) / n * 1e3
+
+
+def depth_time(map_yaml: str, start: Pose2D, n: int = 2000) -> float:
+    world = turtlebot_world(map_yaml, start)
+    world.depth_frame()
+    t0 = time.perf_counter()
+    for _ in range(n):
+        world.depth_frame()
     return (time.perf_counter() - t0) / n * 1e3
 
 
@@ -94,6 +107,7 @@ def main() -> None:
         report(f'sim core real-time multiple ({label})', rtf, 'x', '>= 1000')
         report(f'sim core steps per second ({label})', steps, 'steps/s', '-')
         report(f'time per 640-beam scan ({label})', scan_time(path, start), 'ms', '-')
+        report(f'time per 80x60 depth frame ({label})', depth_time(path, start), 'ms', '-')
     report('sim with ROS I/O, as fast as possible', ros_rtf(args.ros_seconds), 'x real time', '>= 20')
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     with open(args.out, 'w') as f:

@@ -1,8 +1,8 @@
 """The ``simulator`` node: ROS I/O around :class:`cnr_sim.core.world.World` (a stage_ros look-alike).
 
-Publishes /clock, odom, base_pose_ground_truth, scan, battery_state, obstacles, collision events and
-tf; subscribes mobile_base/commands/velocity; services reset_positions and teleport. Every topic,
-service and parameter is documented in the package README.
+Publishes /clock, odom, base_pose_ground_truth, scan, camera/depth/points, battery_state, obstacles,
+collision events and tf; subscribes mobile_base/commands/velocity; services reset_positions and teleport.
+Every topic, service and parameter is documented in the package README.
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ import tf2_ros
 from geometry_msgs.msg import Pose, PoseArray, Quaternion, TransformStamped, Twist
 from nav_msgs.msg import Odometry
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import BatteryState, LaserScan
+from sensor_msgs.msg import BatteryState, LaserScan, PointCloud2, PointField
 from std_srvs.srv import Empty, EmptyResponse
 
 import cnr_params
@@ -30,6 +30,7 @@ from cnr_msgs.msg import BatteryEnergy, Collision
 from cnr_msgs.srv import Teleport, TeleportResponse
 from cnr_params.ros import init_node, private_section
 from cnr_sim.core.battery import BatteryModel, NetMeter, cpu_meter
+from cnr_sim.core.depth_camera import POINT_STEP
 from cnr_sim.core.world import World
 from cnr_sim.params import SimulatorParams, read_params
 
@@ -40,14 +41,18 @@ def yaw_quaternion(yaw: float) -> Quaternion:
 
 
 def transform(stamp: rospy.Time, parent: str, child: str, x: float, y: float, yaw: float,
-              z: float = 0.0) -> TransformStamped:
+              z: float = 0.0, rotation: Optional[Quaternion] = None) -> TransformStamped:
     t = TransformStamped()
     t.header.stamp = stamp
     t.header.frame_id = parent
     t.child_frame_id = child
     t.transform.translation.x, t.transform.translation.y, t.transform.translation.z = x, y, z
-    t.transform.rotation = yaw_quaternion(yaw)
+    t.transform.rotation = rotation if rotation is not None else yaw_quaternion(yaw)
     return t
+
+
+#: camera frame (x forward, z up) -> optical frame (x right, y down, z forward): rpy (-pi/2, 0, -pi/2)
+OPTICAL_ROTATION = Quaternion(-0.5, 0.5, -0.5, 0.5)
 
 
 class RobotProcesses:
@@ -106,7 +111,8 @@ class SimulatorNode:
         self.battery = BatteryModel(params.battery)
         try:
             self.world = World(grid, params.limits, params.laser, params.world, params.initial_pose,
-                               params.obstacles, self.battery, np.random.default_rng(params.seed or None))
+                               params.obstacles, self.battery, np.random.default_rng(params.seed or None),
+                               params.depth if params.depth_enabled else None)
         except ValueError as exc:
             raise cnr_params.ConfigError(rospy.get_name(), 'initial_pose', str(exc))
         self.lock = threading.Lock()
@@ -115,6 +121,8 @@ class SimulatorNode:
         self.odom_pub = rospy.Publisher('odom', Odometry, queue_size=10)
         self.gt_pub = rospy.Publisher('base_pose_ground_truth', Odometry, queue_size=10)
         self.scan_pub = rospy.Publisher('scan', LaserScan, queue_size=5)
+        self.depth_pub = rospy.Publisher('camera/depth/points', PointCloud2, queue_size=2) \
+            if params.depth_enabled else None
         self.battery_pub = rospy.Publisher('battery_state', BatteryState, queue_size=2)
         self.energy_pub = rospy.Publisher('battery/energy', BatteryEnergy, queue_size=2)
         self.collision_pub = rospy.Publisher('mobile_base/events/collision', Collision, queue_size=10)
@@ -125,6 +133,7 @@ class SimulatorNode:
         rospy.Service('reset_positions', Empty, self._on_reset)
         rospy.Service('teleport', Teleport, self._on_teleport)
         self._scan_msg = self._scan_template()
+        self._cloud_msg = self._cloud_template()
         self._procs = RobotProcesses(ns)
         self._cpu = cpu_meter(params.battery_cpu_cgroup) if params.battery_enabled else None
         self._net = NetMeter(params.battery_interface) if params.battery_enabled else None
@@ -169,6 +178,18 @@ class SimulatorNode:
         m.range_max = c.max_range
         return m
 
+    def _cloud_template(self) -> PointCloud2:
+        c = self.p.depth
+        m = PointCloud2()
+        m.header.frame_id = self.p.depth_frame
+        m.height, m.width = c.height, c.width
+        m.fields = [PointField(name, 4 * i, PointField.FLOAT32, 1) for i, name in enumerate('xyz')]
+        m.is_bigendian = False
+        m.point_step = POINT_STEP
+        m.row_step = POINT_STEP * c.width
+        m.is_dense = False                # pixels without a valid depth are NaN
+        return m
+
     def _odometry(self, stamp, frame: str, pose: Pose2D) -> Odometry:
         o = Odometry()
         o.header.stamp = stamp
@@ -183,10 +204,12 @@ class SimulatorNode:
     def publish_static(self) -> None:
         p = self.p
         stamp = rospy.Time.from_sec(max(self.world.time, 1e-3))
-        self.static_tf.sendTransform([
-            transform(stamp, p.footprint_frame, p.base_frame, 0.0, 0.0, 0.0, p.base_height),
-            transform(stamp, p.base_frame, p.laser_frame, p.laser.offset_x, p.laser.offset_y, 0.0,
-                      p.laser_offset_z - p.base_height)])
+        static = [transform(stamp, p.footprint_frame, p.base_frame, 0.0, 0.0, 0.0, p.base_height),
+                  transform(stamp, p.base_frame, p.laser_frame, p.laser.offset_x, p.laser.offset_y, 0.0,
+                            p.laser_offset_z - p.base_height)]
+        if p.depth_enabled:
+            static.append(transform(stamp, p.laser_frame, p.depth_frame, 0.0, 0.0, 0.0, 0.0, OPTICAL_ROTATION))
+        self.static_tf.sendTransform(static)
 
     def publish(self, collision) -> None:
         w, p = self.world, self.p
@@ -223,6 +246,11 @@ class SimulatorNode:
                 pa.header.frame_id = p.map_frame
                 pa.poses = [Pose(position=_point(x, y), orientation=yaw_quaternion(0.0)) for x, y in centres]
                 self.obstacles_pub.publish(pa)
+        if w.depth_due():
+            cloud = self._cloud_msg
+            cloud.header.stamp = stamp
+            cloud.data = w.depth_frame().tobytes()
+            self.depth_pub.publish(cloud)
         if w.time + 1e-9 >= self._next_battery:
             self._next_battery = w.time + 1.0 / p.battery_rate
             self.battery_pub.publish(self._battery_msg(stamp))

@@ -9,6 +9,7 @@ from typing import Any, Dict, List
 from cnr_params import Section, load_yaml
 
 from cnr_sim.core.battery import BatteryConfig
+from cnr_sim.core.depth_camera import DepthCameraConfig
 from cnr_maps.pose import Pose2D
 from cnr_sim.core.kinematics import BaseLimits
 from cnr_sim.core.laser import LaserConfig
@@ -17,7 +18,7 @@ from cnr_sim.core.world import WorldConfig
 
 
 #: the files simulator.launch loads into the simulator's private namespace, in that order
-CONFIG_FILES = ('simulator.yaml', 'robot.yaml', 'laser.yaml', 'battery.yaml')
+CONFIG_FILES = ('simulator.yaml', 'robot.yaml', 'laser.yaml', 'depth_camera.yaml', 'battery.yaml')
 
 
 @dataclass
@@ -30,6 +31,9 @@ class SimulatorParams:
     laser: LaserConfig
     laser_frame: str
     laser_offset_z: float
+    depth: DepthCameraConfig
+    depth_enabled: bool
+    depth_frame: str
     battery: BatteryConfig
     battery_rate: float
     battery_interface: str
@@ -95,14 +99,35 @@ def read_laser(p: Section) -> LaserConfig:
     return laser
 
 
+def read_depth_camera(p: Section) -> DepthCameraConfig:
+    """``~depth_camera``: the Kinect's depth cloud (its position is the laser's: ``~laser/offset``)."""
+    dc = p.section('depth_camera')
+    depth = DepthCameraConfig(width=dc.integer('width', minimum=1), height=dc.integer('height', minimum=1),
+                              fov_h=math.radians(dc.number('fov_h_deg', positive=True, maximum=170.0)),
+                              fov_v=math.radians(dc.number('fov_v_deg', positive=True, maximum=170.0)),
+                              min_range=dc.number('min_range', nonnegative=True),
+                              max_range=dc.number('max_range', positive=True),
+                              rate=dc.number('rate', positive=True),
+                              mount_height=p.section('laser').vector('offset', 3)[2])
+    if depth.min_range >= depth.max_range:
+        raise dc.error('min_range', f'must be below max_range ({depth.max_range})')
+    return depth
+
+
 def read_params(p: Section) -> SimulatorParams:
     """Build :class:`SimulatorParams` from the node's private namespace (errors name the field)."""
     base, odom, ls, bat = p.section('base'), p.section('odom'), p.section('laser'), p.section('battery')
+    dc = p.section('depth_camera')
+    depth_frame = dc.string('frame_id')
+    if depth_frame == ls.string('frame_id'):
+        raise dc.error('frame_id', f"must differ from laser.frame_id ('{depth_frame}'): it is the optical frame, "
+                                   'a child of the laser frame')
     return SimulatorParams(
         map_file=p.string('map_file'),
         real_time_factor=p.number('real_time_factor', nonnegative=True),
         initial_pose=Pose2D(*p.vector('initial_pose', 3)), limits=read_limits(p), world=read_world(p),
         laser=read_laser(p), laser_frame=ls.string('frame_id'), laser_offset_z=ls.vector('offset', 3)[2],
+        depth=read_depth_camera(p), depth_enabled=dc.boolean('enabled'), depth_frame=depth_frame,
         battery=BatteryConfig.from_section(bat),
         battery_rate=bat.number('publish_rate', positive=True),
         battery_interface=bat.string('interface'),

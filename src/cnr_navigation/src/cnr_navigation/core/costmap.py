@@ -9,12 +9,13 @@ Semantics kept from costmap_2d (navigation@noetic-devel):
 * static layer (``static_layer.cpp``, ``interpretValue``): map value == unknown_cost_value ->
   NO_INFORMATION if ``track_unknown_space`` else FREE; value >= lethal_cost_threshold -> LETHAL;
   other values FREE when ``trinary_costmap`` else scaled to 0..254.
-* obstacle layer (``obstacle_layer.cpp``): laser hits closer than ``obstacle_range`` are marked
-  LETHAL; cells along each beam up to ``raytrace_range`` are cleared (raytracing, see
-  :meth:`ObstacleGrid.raytrace`); the robot footprint is cleared when ``footprint_clearing_enabled``.
-  Marks persist until a ray clears them or a recovery resets the layer. The layer combines into
-  the master grid with ``combination_method`` 1 (maximum, NO_INFORMATION cells skipped) or 0
-  (overwrite where the layer knows something).
+* obstacle layer (``obstacle_layer.cpp``): laser hits (and point-cloud points in the height band,
+  :mod:`cnr_navigation.core.pointcloud`) closer than ``obstacle_range`` are marked LETHAL; cells along
+  each beam up to ``raytrace_range`` are cleared (raytracing, see :meth:`ObstacleGrid.raytrace`); the
+  robot footprint is cleared when ``footprint_clearing_enabled``. Marks persist until a ray clears
+  them or a recovery resets the layer. The layer combines into the master grid with
+  ``combination_method`` 1 (maximum, NO_INFORMATION cells skipped) or 0 (overwrite where the layer
+  knows something).
 * inflation layer (``inflation_layer.h``, ``computeCost``): with d the Euclidean distance from a
   cell to the nearest LETHAL cell of the master grid, cost = 254 if d = 0, 253 if
   d <= inscribed radius, else floor(252 * exp(-cost_scaling_factor * (d - inscribed radius)))
@@ -64,7 +65,8 @@ class ObstacleLayerConfig:
         obstacle_range: hits farther than this from the sensor are not marked [m].
         raytrace_range: beams clear free space up to this distance [m].
         min_obstacle_height / max_obstacle_height: a planar scan marks only when the sensor's
-            height lies in this band [m] (costmap_2d filters each point's z the same way).
+            height lies in this band [m]; a point cloud keeps only the points in it (costmap_2d filters
+            each point's z).
         inf_is_valid: out-of-range readings (inf or >= range_max) clear up to raytrace_range.
     """
 
@@ -255,7 +257,8 @@ class GridGeometry:
 
 @dataclass
 class Observation:
-    """One laser scan turned into points in the costmap frame.
+    """One sensor message (a laser scan, or a point cloud: :mod:`cnr_navigation.core.pointcloud`) turned into
+    points in the costmap frame.
 
     Attributes:
         sensor_x / sensor_y: sensor position [m].
@@ -345,8 +348,9 @@ class ObstacleGrid:
         """Clear the cells crossed by every clearing ray (all beams at once).
 
         Rays are sampled every half cell from the sensor to their end point; the end cell of a
-        ray that hit something is left alone (it is marked next). Beams that are closer together
-        than half a cell at the raytrace range are thinned first: they cross the same cells.
+        ray that hit something is left alone (it is marked next). Rays come ordered by direction; when
+        neighbours are typically closer together than half a cell at the far end they are thinned
+        first: they cross the same cells.
         """
         if obs.clear_x.size == 0:
             return
@@ -357,8 +361,8 @@ class ObstacleGrid:
         max_len = float(length.max())
         if max_len <= 0.0:
             return
-        if n > 2:   # angular spacing between neighbouring rays at the far end
-            spacing = max_len * abs(math.atan2(dy[1], dx[1]) - math.atan2(dy[0], dx[0]))
+        if n > 2:   # typical spacing between neighbouring rays (ordered by direction) at the far end
+            spacing = max_len * float(np.median(np.abs(np.diff(np.arctan2(dy, dx)))))
             stride = max(1, int(0.5 * g.resolution / max(spacing, 1e-9)))
             if stride > 1:
                 keep = np.zeros(n, dtype=bool)

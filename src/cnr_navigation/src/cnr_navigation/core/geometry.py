@@ -42,3 +42,11 @@ def transform_path(path: np.ndarray, transform: Pose2D) -> np.ndarray:
         return path.reshape(0, 3)
     xs, ys = transform.apply(path[:, 0], path[:, 1])
     return np.column_stack((xs, ys, normalize_angle(path[:, 2] + transform.yaw)))
+
+
+def quaternion_to_matrix(q: Quaternion) -> np.ndarray:
+    """3 x 3 rotation matrix of a quaternion (x, y, z, w); normalised first."""
+    x, y, z, w = np.asarray(q, dtype=np.float64) / math.sqrt(sum(v * v for v in q))
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])

@@ -23,6 +23,11 @@ def LAYER(sub: str) -> List[Tuple[str, str]]:  # noqa: N802 (reads as a constant
     return [(label, f'{ns}/{sub}') for label, ns in COSTMAPS]
 
 
+#: the namespaces of the obstacle layer's observation sources, expanded from the configured
+#: ``observation_sources`` of each costmap (labelled with the source's name)
+SOURCES = [('<source>', f'{ns}/obstacle_layer/<source>') for _, ns in COSTMAPS]
+
+
 #: (table title, declarations, [(label, namespace under the node)], searched upwards)
 GROUPS = [
     ('~ (move_base, reconfigurable)', MOVE_BASE_CFG, [('', '')], False),
@@ -33,8 +38,8 @@ GROUPS = [
     ('~<costmap>/static_layer/ (read once)', STATIC_DIRECT, [('', 'global_costmap/static_layer')], False),
     ('~<costmap>/obstacle_layer/ (reconfigurable)', OBSTACLE_PLUGIN_CFG, LAYER('obstacle_layer'), False),
     ('~<costmap>/obstacle_layer/ (read once)', OBSTACLE_DIRECT, LAYER('obstacle_layer'), False),
-    ('~<costmap>/obstacle_layer/<source>/', SOURCE_DIRECT, LAYER('obstacle_layer/scan'), False),
-    ('~<costmap>/obstacle_layer/<source>/ (searched upwards)', SOURCE_SEARCHED, LAYER('obstacle_layer/scan'), True),
+    ('~<costmap>/obstacle_layer/<source>/', SOURCE_DIRECT, SOURCES, False),
+    ('~<costmap>/obstacle_layer/<source>/ (searched upwards)', SOURCE_SEARCHED, SOURCES, True),
     ('~<costmap>/inflation_layer/ (reconfigurable)', INFLATION_PLUGIN_CFG, LAYER('inflation_layer'), False),
     ('~NavfnROS/', NAVFN_DIRECT, [('', 'NavfnROS')], False),
     ('~DWAPlannerROS/ (reconfigurable)', DWA_CFG, [('', 'DWAPlannerROS')], False),
@@ -47,12 +52,25 @@ GROUPS = [
 ]
 
 
-def _value(tree: Dict[str, Any], params: Sequence[Tuple[str, str]], name: str, searched: bool) -> str:
-    found = []
+def _expand(tree: Dict[str, Any], params: Sequence[Tuple[str, str]]) -> List[Tuple[str, str]]:
+    """``params`` with each ``<source>`` namespace replaced by the costmap's configured sources."""
+    out = []
     for label, ns in params:
+        if '<source>' not in ns:
+            out.append((label, ns))
+            continue
+        layer = ns.split('/<source>')[0]
+        names = lookup(tree, f'{NODE}/{layer}/observation_sources')
+        out += [(src, ns.replace('<source>', src)) for src in (names.split() if isinstance(names, str) else [])]
+    return out
+
+
+def _value(tree: Dict[str, Any], params: Sequence[Tuple[str, str]], name: str, searched: bool) -> str:
+    found: List[Tuple[str, Any]] = []
+    for label, ns in _expand(tree, params):
         full = '/'.join(p for p in (NODE, ns) if p)
         v = lookup(tree, search(tree, full, name) or '') if searched else lookup(tree, f'{full}/{name}')
-        if v is not None:
+        if v is not None and (label, repr(v)) not in [(lb, repr(x)) for lb, x in found]:
             found.append((label, v))
     if not found:
         return '(set at run time)'

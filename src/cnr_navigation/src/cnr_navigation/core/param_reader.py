@@ -23,8 +23,8 @@ from cnr_navigation.core.param_tables import (
     CLEAR_RECOVERY_DIRECT, COSTMAP_CFG, COSTMAP_DIRECT, DWA_CFG, DWA_DIRECT, DWA_RENAMED, GENERIC_PLUGIN_CFG,
     GLOBAL_PLANNERS, INFLATION_PLUGIN_CFG, LOCAL_PLANNERS, MOVE_BASE_CFG, MOVE_BASE_DIRECT, NAVFN_DIRECT,
     OBSTACLE_DIRECT, OBSTACLE_PLUGIN_CFG, PLUGIN_TYPES, ROTATE_BLP, ROTATE_RECOVERY_DIRECT, SOURCE_DIRECT,
-    SOURCE_SEARCHED, STATIC_DIRECT, ClearTypes, Param, RotateTypes, _ROBOT_RADIUS, CONTROLLER_FREQUENCY,
-    ROTATE_BLP_TOLERANCE)
+    SOURCE_DATA_TYPES, SOURCE_SEARCHED, STATIC_DIRECT, ClearTypes, Param, RotateTypes, _ROBOT_RADIUS,
+    CONTROLLER_FREQUENCY, ROTATE_BLP_TOLERANCE)
 from cnr_navigation.core.planner import PlannerConfig
 from cnr_navigation.core.recovery import ClearCostmapConfig, RotateConfig
 
@@ -98,6 +98,7 @@ class SourceParams:
     """One observation source of an obstacle layer."""
 
     name: str
+    data_type: str                            # one of SOURCE_DATA_TYPES
     topic: str
     sensor_frame: str
     expected_update_rate: float
@@ -220,8 +221,9 @@ def read_costmap(reader: ParamReader, node_ns: str, name: str, warnings: List[st
             for src in names:
                 sns = _join(pns, src)
                 sp = read_group(reader, sns, SOURCE_DIRECT)
-                if sp['data_type'] != 'LaserScan':
-                    raise ConfigError(sns, 'data_type', f"unsupported '{sp['data_type']}' (only LaserScan)")
+                if sp['data_type'] not in SOURCE_DATA_TYPES:
+                    raise ConfigError(sns, 'data_type', f"unsupported '{sp['data_type']}' (expected one of: "
+                                                        f"{', '.join(SOURCE_DATA_TYPES)})")
                 for p in SOURCE_SEARCHED:
                     found = reader.search(sns, p.name)
                     if not found:
@@ -230,9 +232,10 @@ def read_costmap(reader: ParamReader, node_ns: str, name: str, warnings: List[st
                 read_sources.append((src, sp))
             r = read_group(reader, pns, OBSTACLE_PLUGIN_CFG)
             if not read_sources:
-                raise ConfigError(pns, 'observation_sources', 'no observation source (a LaserScan source is needed)')
+                raise ConfigError(pns, 'observation_sources', 'no observation source (at least one is needed)')
             for src, sp in read_sources:
-                sources.append(SourceParams(src, sp['topic'], sp['sensor_frame'], sp['expected_update_rate'],
+                sources.append(SourceParams(src, sp['data_type'], sp['topic'], sp['sensor_frame'],
+                                            sp['expected_update_rate'],
                                             ObstacleLayerConfig(
                                                 enabled=r['enabled'],
                                                 footprint_clearing_enabled=r['footprint_clearing_enabled'],

@@ -232,18 +232,21 @@ OBSTACLE_DIRECT: List[Param] = [
 ]
 
 SOURCE_DIRECT: List[Param] = [
-    _d('observation_persistence', 'Accepted; each update uses the scans received since the last one [s].', 0),
-    _d('expected_update_rate', 'Maximum age of the newest scan before the sensor is out of date [s] '
+    _d('observation_persistence', 'Accepted; each update uses the messages received since the last one [s].', 0),
+    _d('expected_update_rate', 'Maximum age of the newest message before the sensor is out of date [s] '
        '(0: never).', 0),
-    _s('data_type', 'Must be LaserScan.'),
-    _d('min_obstacle_height', 'Scans from sensors below this height do not mark [m].'),
-    _d('max_obstacle_height', 'Scans from sensors above this height do not mark [m].'),
-    _b('inf_is_valid', 'Out-of-range readings clear along their whole beam.'),
+    _s('data_type', 'LaserScan or PointCloud2.'),
+    _d('min_obstacle_height', 'Lower end of the height band in the costmap frame [m]: cloud points outside it are '
+       'dropped; a LaserScan marks only when its sensor is inside it.'),
+    _d('max_obstacle_height', 'Upper end of the height band [m] (capped by the layer\'s max_obstacle_height).'),
+    _b('inf_is_valid', 'LaserScan: out-of-range readings clear along their whole beam (read, unused, for a cloud).'),
     _b('clearing', 'The source clears free space by raytracing.'),
     _b('marking', 'The source marks obstacles.'),
-    _s('topic', 'Topic of the sensor_msgs/LaserScan.'),
-    _s('sensor_frame', 'Frame of the sensor (\'\': the scan\'s header frame).'),
+    _s('topic', 'Topic of the sensor_msgs/LaserScan or sensor_msgs/PointCloud2.'),
+    _s('sensor_frame', 'Frame of the sensor origin (\'\': the message\'s header frame).'),
 ]
+#: the message types an observation source can have (``data_type``)
+SOURCE_DATA_TYPES = ('LaserScan', 'PointCloud2')
 SOURCE_SEARCHED: List[Param] = [
     _d('obstacle_range', 'Maximum range at which hits are marked [m] (searched upwards).', 0),
     _d('raytrace_range', 'Maximum range cleared by raytracing [m] (searched upwards).', 0),

@@ -14,6 +14,7 @@ import numpy as np
 
 from cnr_sim.core.battery import BatteryModel
 from cnr_sim.core.collision import ClearanceField, obstacle_mask
+from cnr_sim.core.depth_camera import DepthCamera, DepthCameraConfig
 from cnr_maps.pose import Pose2D
 from cnr_sim.core.kinematics import BaseLimits, DiffDrive, integrate
 from cnr_sim.core.laser import FakeLaser, LaserConfig
@@ -57,17 +58,21 @@ class World:
         limits: base limits; laser: laser parameters; battery: battery model (or None).
         config: world parameters; obstacles: moving obstacles; start: initial pose.
         rng: random generator (noise).
+        depth: depth camera parameters (None: no depth camera); it is the Kinect the laser comes from,
+            so it sits at the laser's position.
     """
 
     def __init__(self, grid: OccupancyMap, limits: BaseLimits, laser: LaserConfig, config: WorldConfig,
                  start: Pose2D, obstacles: Optional[List[MovingObstacle]] = None,
-                 battery: Optional[BatteryModel] = None, rng: Optional[np.random.Generator] = None) -> None:
+                 battery: Optional[BatteryModel] = None, rng: Optional[np.random.Generator] = None,
+                 depth: Optional[DepthCameraConfig] = None) -> None:
         self.grid = grid
         self.config = config
         self.rng = rng or np.random.default_rng()
         mask = obstacle_mask(grid)
         self.clearance = ClearanceField(grid, mask)
         self.laser = FakeLaser(laser, mask, grid.resolution, grid.origin, self.rng)
+        self.depth = DepthCamera(depth, mask, grid.resolution, grid.origin) if depth is not None else None
         self.base = DiffDrive(limits)
         self.obstacles = list(obstacles or [])
         self.battery = battery
@@ -81,6 +86,8 @@ class World:
         self.steps = 0
         self._scan_period = 1.0 / laser.rate
         self._next_scan = 0.0
+        self._depth_period = 1.0 / depth.rate if depth is not None else math.inf
+        self._next_depth = 0.0
         problem = self.pose_problem(start)
         if problem:
             raise ValueError(f'start pose ({start.x}, {start.y}): {problem}')
@@ -111,6 +118,22 @@ class World:
         self._next_scan = self.time + self._scan_period
         centres, radii = self.obstacle_positions()
         return self.laser.scan(self.pose.x, self.pose.y, self.pose.yaw, centres, radii)
+
+    def depth_due(self) -> bool:
+        return self.depth is not None and self.time + 1e-9 >= self._next_depth
+
+    def depth_frame(self) -> np.ndarray:
+        """Depth camera cloud at the current pose (also schedules the next frame).
+
+        Frames follow a fixed schedule (``k / rate``), so the mean rate is ``rate`` even when the period
+        is not a multiple of the step; each frame is taken at the first step at or after its time.
+        """
+        self._next_depth += self._depth_period
+        if self._next_depth <= self.time:                 # fell behind (first frame): restart the schedule
+            self._next_depth = self.time + self._depth_period
+        centres, radii = self.obstacle_positions()
+        sx, sy, syaw = self.laser.sensor_pose(self.pose.x, self.pose.y, self.pose.yaw)
+        return self.depth.frame(sx, sy, syaw, centres, radii)
 
     # -- commands ------------------------------------------------------------------------------
     def command(self, v: float, w: float) -> None:
