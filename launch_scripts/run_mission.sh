@@ -50,6 +50,8 @@ cnr_source_ws
 # naming file and field and exit 2 on a problem; on success: name, map (absolute path), start x y yaw
 read -r name map x y a < <(rosrun cnr_mission check_scenario "$scenario_file") || exit 2
 [ -n "$report" ] || report="$CNR_WS/reports/$name-$(date +%Y%m%d-%H%M%S)"
+# a report folder holds one run: its measurement store and relay queues would be reloaded by the next one
+[ -z "$(ls -A "$report" 2>/dev/null)" ] || cnr_die "report folder $report is not empty (it holds another run; choose another --report-dir)"
 mkdir -p "$report"
 if [ -n "$two_host" ]; then
   case "$placement" in *.yaml|*.yml|*/*) placement="$(realpath -m "$placement")" ;; esac
