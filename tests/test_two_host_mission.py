@@ -68,3 +68,31 @@ def test_robot_does_not_stall_while_the_cloud_is_unreachable(tmp_path):
     assert act['longest_input_gap'] < 1.0, act          # its measurements are made on the robot
     assert s['network_profile']['alive_fraction'] < 0.95    # the outages were seen by the network monitor
     assert 'local fallback' in out
+
+
+def test_store_and_forward_across_outages(tmp_path):
+    """LMM, GG and MFG on the cloud; the link is cut four times: the cloud's store ends with every measurement
+    the robot made (the sender's disk queue), once each, in order."""
+    from cnr_maps.measurements import read_tsv
+    from cnr_msgs.msg import MergedMeasurement
+    from cnr_store_forward.core.queue import DiskQueue
+    status, s, report, out = two_host(tmp_path, 'monitoring_cloud', '--trace',
+                                      os.path.join(WS, 'config', 'trace_outages.tsv'))
+    assert status in (0, 3), out[-3000:]         # the hotspot is not the point here (the MFG is on the cloud)
+    sf = s['store_and_forward']
+    assert sf['queued'] == 0 and sf['acked_seq'] == sf['last_seq'] == sf['appended'] > 100, sf
+    assert sf['resent'] > 0 and not sf['full'] and sf['rejected'] == 0, sf    # the outages cost resends only
+    assert 'store-and-forward drained' in out
+    queue = DiskQueue(os.path.join(report, 'store_forward_robot', 'merged_measurements'), 10 ** 6, 2 ** 30, 2 ** 22,
+                      False)
+    try:
+        made = []
+        for seq in range(1, queue.last_seq + 1):
+            m = MergedMeasurement()
+            m.deserialize(queue.read(seq).data)
+            made.append((round(m.header.stamp.to_sec(), 6), round(m.temperature, 4)))
+    finally:
+        queue.close()
+    stored = [(m.time, round(m.temperature, 4)) for m in read_tsv(os.path.join(report, 'store.tsv'))]
+    assert stored == made, f'{len(stored)} stored, {len(made)} made'
+    assert [t for t, _ in stored] == sorted(t for t, _ in stored)

@@ -28,6 +28,11 @@ def cell_msg(grid: MapcellGrid, book: CellBook, index: int) -> CellStateMsg:
                         min_temperature=s.min, max_temperature=s.max)
 
 
+def _key(time: float, x: float, y: float, temperature: float) -> tuple:
+    """A measurement's identity at the store's precision (cnr_maps.measurements: 6 decimals of s, 4 of m, degC)."""
+    return round(time, 6), round(x, 4), round(y, 4), round(temperature, 4)
+
+
 class ManagerNode:
     def __init__(self, p: ManagerParams) -> None:
         self.p = p
@@ -43,9 +48,11 @@ class ManagerNode:
         rospy.loginfo(f'{len(self.grid)} mapcells ({self.grid.cols} x {self.grid.rows} of {self.grid.cell_size:g} m); '
                       f'{self.book.count} stored measurements reloaded from {p.store}')
         self.outside = 0
-        # a measurement is stored once: one whose stamp is not newer than the newest stored one is a duplicate
-        # (a store-and-forward receiver that crashed between delivering and saving its mark delivers again)
-        self.newest = max((m.time for m in self.book.measurements()), default=-math.inf)
+        # a measurement is stored once: one older than the newest stored one, or equal to it in stamp and values,
+        # is a duplicate (a store-and-forward receiver that crashed between delivering and saving its mark
+        # delivers again); two different readings with one stamp are both kept
+        stored = self.book.measurements()
+        self.newest = _key(stored[-1].time, stored[-1].x, stored[-1].y, stored[-1].temperature) if stored else None
         self.duplicates = 0
         self.pub = rospy.Publisher('cell_states', CellStates, queue_size=1, latch=True)
         self.measurement_pub = rospy.Publisher('mapcell_measurements', MergedMeasurement, queue_size=100)
@@ -77,12 +84,13 @@ class ManagerNode:
             rospy.logwarn_throttle(5.0, f'ignored a merged measurement with non-finite values {values}')
             return
         with self.lock:
-            if msg.header.stamp.to_sec() <= self.newest:
+            key = _key(msg.header.stamp.to_sec(), msg.x, msg.y, msg.temperature)
+            if self.newest is not None and (key[0] < self.newest[0] or key == self.newest):
                 self.duplicates += 1
-                rospy.logwarn_throttle(5.0, f'ignored {self.duplicates} measurement(s) not newer than the newest '
-                                            f'stored one (duplicates or out of order)')
+                rospy.logwarn_throttle(5.0, f'ignored {self.duplicates} measurement(s) older than or equal to the '
+                                            f'newest stored one (duplicates or out of order)')
                 return
-            self.newest = msg.header.stamp.to_sec()
+            self.newest = key
             m = self.book.new_measurement(msg.header.stamp.to_sec(), msg.x, msg.y, msg.temperature,
                                           msg.pose_stamp.to_sec())
             if m is None:
