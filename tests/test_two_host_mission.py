@@ -94,5 +94,8 @@ def test_store_and_forward_across_outages(tmp_path):
     finally:
         queue.close()
     stored = [(m.time, round(m.temperature, 4)) for m in read_tsv(os.path.join(report, 'store.tsv'))]
-    assert stored == made, f'{len(stored)} stored, {len(made)} made'
+    # everything made up to the drain (the monitor's report) is stored; what the robot made while the mission was
+    # being shut down may or may not have crossed, but never out of order or twice
+    n = sf['appended']
+    assert len(stored) >= n and stored == made[:len(stored)], f'{len(stored)} stored, {len(made)} made, {n} drained'
     assert [t for t, _ in stored] == sorted(t for t, _ in stored)
