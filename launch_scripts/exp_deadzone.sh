@@ -12,7 +12,7 @@
 #   normal_uplink  as normal, but the dead zone cuts robot -> cloud only (config/link_map_corridor_uplink.yaml):
 #                  the paper's own description of its normal run ("sensor data does not reach the MFG")
 # Each run is a real-time two-host mission (run_mission.sh --two-host) with its report in
-# DIR/runs/<mode>-<i>/ (default DIR bench_results/deadzone). Resumable: a run whose summary.json exists is
+# DIR/runs/<mode>-<i>/ and its output in DIR/runs/<mode>-<i>.log (default DIR bench_results/deadzone). Resumable: a run whose summary.json exists is
 # kept (--fresh starts over). Then DIR/runs.tsv, DIR/deadzone.md (time and measurements to the hotspot,
 # median and spread, beside the paper's ~100 measurements / ~33 s; the MFG's longest idle time) and
 # DIR/deadzone.png (temperature vs measurement number, the paper's plot). About 2 minutes per run.
@@ -53,17 +53,17 @@ for i in $(seq 1 "$runs"); do
       cnr_log "[$done_n/$total] $mode run $i: done before, kept"
       continue
     fi
-    rm -rf "$dir"; mkdir -p "$dir"
+    rm -rf "$dir"; mkdir -p "$(dirname "$dir")"
     cnr_log "[$done_n/$total] $mode run $i ($placement), $(( $(date +%s) - t0 )) s so far"
     set +e
     "$CNR_WS/launch_scripts/run_mission.sh" --two-host --scenario deadzone --placement "$placement" \
-      --link-map "$CNR_WS/config/$link_map" --report-dir "$dir" > "$dir/run.log" 2>&1
+      --link-map "$CNR_WS/config/$link_map" --report-dir "$dir" > "$dir.log" 2>&1
     status=$?
     set -e
     case "$status" in
-      0|3) grep -h "hotspot found in\|timeout after" "$dir/run.log" | tail -1 || true ;;
+      0|3) grep -h "hotspot found in\|timeout after" "$dir.log" | tail -1 || true ;;
       130) cnr_log "interrupted"; exit 130 ;;
-      *) cnr_log "$mode run $i failed (status $status; see $dir/run.log)"; rm -f "$dir/summary.json" ;;
+      *) cnr_log "$mode run $i failed (status $status; see $dir.log)"; rm -f "$dir/summary.json" ;;
     esac
   done
 done
