@@ -11,7 +11,7 @@ from network_monitor.core import config as monitor_config
 from network_monitor.core.echo import EchoStats, LinkSample, link_state
 from network_monitor.core.estimate import BandwidthEstimator, PassiveSettings, r_bw
 from network_monitor.core.iface import choose_interface, netifaces_table
-from network_monitor.core.probe import iperf3_command, parse_iperf3_json, run_probe
+from network_monitor.core.probe import ProbeSettings, iperf3_command, parse_iperf3_json, run_probe
 from network_monitor.core.rate import RateSampler, sysfs_reader
 
 TABLE = {'lo': [('127.0.0.1', '255.0.0.0')],
@@ -70,6 +70,7 @@ def test_link_state_prefers_the_echo_then_a_fresh_bridge_sample():
 # ---------------------------------------------------------------- C_bw
 def test_rate_windows_in_bits_per_second_with_gaps_and_resets():
     r = RateSampler(min_window=0.1, history=10.0)
+    assert r.last_end() == -math.inf
     assert r.add(0.0, (1000, 0)) is None     # baseline
     assert r.add(0.05, (1100, 0)) is None    # too short (< 0.9 x 0.1 s): merged into the next window
     assert r.add(0.1, (1000 + 500, 750)) == pytest.approx(8 * 1250 / 0.1)
@@ -80,7 +81,7 @@ def test_rate_windows_in_bits_per_second_with_gaps_and_resets():
     assert r.add(0.5, None) is None          # interface gone
     assert r.add(0.6, (10 ** 9, 0)) is None
     assert r.add(0.7, (10 ** 9 + 250, 0)) == pytest.approx(20000.0)
-    assert r.last() == pytest.approx(20000.0)
+    assert r.last() == pytest.approx(20000.0) and r.last_end() == 0.7
     assert r.mean(0.7, 0.45) == pytest.approx((10000.0 + 20000.0) / 2)
     assert r.peak(0.7, 1.0) == pytest.approx(100000.0)
     assert math.isnan(r.mean(100.0, 1.0))
@@ -155,6 +156,21 @@ def test_iperf3_success_uses_the_received_rate():
     assert r.ok and r.bits_per_second == 7.9e8 and r.bytes_sent == 1000000 and r.seconds == 0.0102
 
 
+def test_iperf3_bytes_include_the_omitted_seconds():
+    data = dict(GOOD, intervals=[{'sum': {'bytes': 3000000, 'omitted': True}},
+                                 {'sum': {'bytes': 1000000, 'omitted': False}}])
+    r = parse_iperf3_json(json.dumps(data))
+    assert r.ok and r.bytes_sent == 4000000 and r.bits_per_second == 7.9e8
+
+
+def test_the_probe_is_time_bounded_with_omitted_slow_start_and_paced_to_its_byte_cap():
+    settings = ProbeSettings(seconds=2, omit=2, max_bytes=50000000, timeout=8.0)
+    argv = iperf3_command('iperf3', '10.0.0.2', 5201, settings)
+    assert argv[argv.index('-t') + 1] == '2' and argv[argv.index('-O') + 1] == '2'
+    assert argv[argv.index('-b') + 1] == '100000000' and settings.cap == 100000000   # 50 MB over 4 s
+    assert '-n' not in argv and '-J' in argv and argv[argv.index('--connect-timeout') + 1] == '4000'
+
+
 @pytest.mark.parametrize('text,fragment', [
     (json.dumps({'start': {}, 'intervals': [], 'end': {},
                  'error': 'unable to connect to server: Connection refused'}), 'Connection refused'),
@@ -170,21 +186,23 @@ def test_iperf3_errors_become_results(text, fragment):
 
 
 def test_run_probe_never_raises():
+    settings = ProbeSettings(seconds=1, omit=1, max_bytes=1000, timeout=4.0)
+
     def timeout(argv, t):
         raise subprocess.TimeoutExpired(argv, t)
 
     def good(argv, t):
-        assert argv == iperf3_command('iperf3', '10.0.0.2', 5201, 1000, 4.0)
-        assert argv[argv.index('-n') + 1] == '1000' and '-J' in argv
+        assert argv == iperf3_command('iperf3', '10.0.0.2', 5201, settings) and t == 4.0
         return subprocess.CompletedProcess(argv, 0, json.dumps(GOOD), '')
 
     def crash(argv, t):
         return subprocess.CompletedProcess(argv, 1, '', 'iperf3: error - bad\n')
 
-    assert 'within 4 s' in run_probe('10.0.0.2', 5201, 1000, 4.0, runner=timeout).error
-    assert run_probe('10.0.0.2', 5201, 1000, 4.0, runner=good).ok
-    assert run_probe('10.0.0.2', 5201, 1000, 4.0, runner=crash).error == 'iperf3 exited with 1: iperf3: error - bad'
-    r = run_probe('127.0.0.1', 5201, 1000, 1.0, executable='/nonexistent/iperf3')
+    assert 'within 4 s' in run_probe('10.0.0.2', 5201, settings, 'iperf3', runner=timeout).error
+    assert run_probe('10.0.0.2', 5201, settings, 'iperf3', runner=good).ok
+    assert run_probe('10.0.0.2', 5201, settings, 'iperf3', runner=crash).error == \
+        'iperf3 exited with 1: iperf3: error - bad'
+    r = run_probe('127.0.0.1', 5201, settings, '/nonexistent/iperf3')
     assert not r.ok and 'cannot run' in r.error
 
 
@@ -227,3 +245,6 @@ def test_the_shipped_config_is_valid_and_a_missing_parameter_is_named(workspace)
         monitor_config.from_section(Section(data, 'x'))
     with pytest.raises(ConfigError, match='peer: must differ'):
         monitor_config.from_section(Section(dict(load_yaml(path), peer='robot'), 'x'))
+    with pytest.raises(ConfigError, match=r'probe_timeout: must be > probe_seconds \+ probe_omit \(4 s\)'):
+        monitor_config.from_section(Section(dict(load_yaml(path), probe_timeout=4.0), 'x'))
+    assert (cfg.probe.seconds, cfg.probe.omit, cfg.probe.cap) == (2, 2, 100000000)
