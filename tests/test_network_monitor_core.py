@@ -10,7 +10,7 @@ from cnr_params import ConfigError, Section, load_yaml
 from network_monitor.core import config as monitor_config
 from network_monitor.core.echo import EchoStats, LinkSample, link_state
 from network_monitor.core.estimate import BandwidthEstimator, PassiveSettings, r_bw
-from network_monitor.core.iface import choose_interface, netifaces_table
+from network_monitor.core.iface import Choice, choose_interface, netifaces_table
 from network_monitor.core.probe import ProbeSettings, iperf3_command, parse_iperf3_json, run_probe
 from network_monitor.core.rate import RateSampler, sysfs_reader
 
@@ -112,6 +112,14 @@ def test_interface_choice(peer, configured, expected):
     assert (c.interface, c.reason) == expected
 
 
+def test_a_point_to_point_device_whose_remote_end_is_the_peer():
+    # the testbed's TUN device: 10.77.0.1 peer 10.77.0.2/32 (no subnet contains the peer)
+    table = {'lo': [('127.0.0.1', '255.0.0.0')], 'bp-r': [('10.77.0.1', '255.255.255.255', '10.77.0.2')]}
+    assert choose_interface('10.77.0.2', table, None) == Choice('bp-r', 'point-to-point')
+    assert choose_interface('10.77.0.1', table, None) == Choice('lo', 'local address')
+    assert choose_interface('10.77.0.3', table, None).interface == ''
+
+
 def test_no_interface_fits():
     assert choose_interface('8.8.8.8', {'eth0': [('192.168.1.10', '255.255.255.0')]}, None).interface == ''
 
@@ -122,20 +130,22 @@ def test_netifaces_table_from_a_fake_module():
 
         @staticmethod
         def interfaces():
-            return ['lo', 'eth0', 'can0']
+            return ['lo', 'eth0', 'can0', 'tun0']
 
         @staticmethod
         def ifaddresses(name):
             return {'lo': {2: [{'addr': '127.0.0.1', 'netmask': '255.0.0.0'}]},
                     'eth0': {2: [{'addr': '192.168.1.10', 'netmask': '255.255.255.0'}], 10: [{'addr': 'fe80::1'}]},
-                    'can0': {}}[name]
+                    'can0': {},
+                    'tun0': {2: [{'addr': '10.77.0.1', 'netmask': '255.255.255.255', 'peer': '10.77.0.2'}]}}[name]
 
         @staticmethod
         def gateways():
             return {'default': {2: ('192.168.1.1', 'eth0')}}
 
     table, default = netifaces_table(Fake)
-    assert table == {'lo': [('127.0.0.1', '255.0.0.0')], 'eth0': [('192.168.1.10', '255.255.255.0')], 'can0': []}
+    assert table == {'lo': [('127.0.0.1', '255.0.0.0')], 'eth0': [('192.168.1.10', '255.255.255.0')], 'can0': [],
+                     'tun0': [('10.77.0.1', '255.255.255.255', '10.77.0.2')]}
     assert default == 'eth0'
 
 
