@@ -238,6 +238,13 @@ def test_passive_estimate_decays_towards_proven_usage_and_is_raised_by_it():
     assert b.estimate(200.0, 0.0) == (5e6, 0.0, 'probe')
 
 
+def test_only_usage_since_the_probe_counts_for_the_passive_estimate():
+    b = BandwidthEstimator(SETTINGS)
+    assert b.usage_span(50.0) == 10.0                   # no probe yet: the whole passive window
+    b.probed(100.0, 1e6)
+    assert b.usage_span(100.0) == 0.0 and b.usage_span(104.0) == 4.0 and b.usage_span(130.0) == 10.0
+
+
 def test_r_bw_is_eq_4_1_with_a_floored_c_bw():
     assert r_bw(8e6, 2e6, 1000.0) == 4.0
     assert r_bw(8e6, 0.0, 1000.0) == 8000.0             # idle link: finite, A_bw / floor

@@ -116,7 +116,8 @@ def run(args: argparse.Namespace) -> int:
     profiles = Latest(f"{rospy.get_param(f'{MONITOR}/topic_prefix')}/{name}/network_profile", NetworkProfile)
     load = Load(LOAD_TOPIC, args.load_hz)
     profile_now = rospy.ServiceProxy(f'{MONITOR}/profile_now', ProfileNow)
-    profiles.wait(lambda m: m.alive and math.isfinite(m.rtt), READY_TIMEOUT, 'an alive profile (echo across the bridge)')
+    profiles.wait(lambda m: m.alive and math.isfinite(m.rtt), READY_TIMEOUT,
+                  'an alive profile (echo across the bridge)')
     from cnr_harness import wait_until
     wait_until(lambda: load.pub.get_num_connections() > 0, READY_TIMEOUT, 'the load sink on the cloud')
     log = TsvLog(args.out, Sample.columns())

@@ -172,7 +172,7 @@ class Monitor:
             link = link_state(self.echo.summary(now), now, cfg.alive_timeout, self.bridge,
                               cfg.link_quality_timeout)
             c_bw = self.sampler.mean(now, cfg.c_bw_span)
-            peak = self.sampler.peak(now, cfg.passive.window)
+            peak = self.sampler.peak(now, self.estimator.usage_span(now))
             a_bw, age, method = self.estimator.estimate(now, peak)
             probe_bytes = self.probe_bytes
         msg = NetworkProfile(peer=cfg.peer, alive=link.alive, rtt=link.rtt, rtt_spread=link.rtt_spread,

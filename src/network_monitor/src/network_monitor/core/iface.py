@@ -32,7 +32,8 @@ def netifaces_table(netifaces_module) -> Tuple[Table, Optional[str]]:
     for name in netifaces_module.interfaces():
         entries = netifaces_module.ifaddresses(name).get(af_inet, [])
         table[name] = [(e['addr'], e.get('netmask', '255.255.255.255'))
-                       + ((e['peer'],) if e.get('peer') and e['peer'] != e['addr'] else ()) for e in entries if 'addr' in e]
+                       + ((e['peer'],) if e.get('peer') and e['peer'] != e['addr'] else ())
+                       for e in entries if 'addr' in e]
     default = netifaces_module.gateways().get('default', {}).get(af_inet)
     return table, (default[1] if default else None)
 
