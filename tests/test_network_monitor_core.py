@@ -10,8 +10,8 @@ from cnr_params import ConfigError, Section, load_yaml
 from network_monitor.core import config as monitor_config
 from network_monitor.core.echo import EchoStats, LinkSample, link_state
 from network_monitor.core.estimate import BandwidthEstimator, PassiveSettings, r_bw
-from network_monitor.core.iface import choose_interface, netifaces_table
-from network_monitor.core.probe import iperf3_command, parse_iperf3_json, run_probe
+from network_monitor.core.iface import Choice, choose_interface, netifaces_table
+from network_monitor.core.probe import ProbeSettings, iperf3_command, parse_iperf3_json, run_probe
 from network_monitor.core.rate import RateSampler, sysfs_reader
 
 TABLE = {'lo': [('127.0.0.1', '255.0.0.0')],
@@ -70,6 +70,7 @@ def test_link_state_prefers_the_echo_then_a_fresh_bridge_sample():
 # ---------------------------------------------------------------- C_bw
 def test_rate_windows_in_bits_per_second_with_gaps_and_resets():
     r = RateSampler(min_window=0.1, history=10.0)
+    assert r.last_end() == -math.inf
     assert r.add(0.0, (1000, 0)) is None     # baseline
     assert r.add(0.05, (1100, 0)) is None    # too short (< 0.9 x 0.1 s): merged into the next window
     assert r.add(0.1, (1000 + 500, 750)) == pytest.approx(8 * 1250 / 0.1)
@@ -80,7 +81,7 @@ def test_rate_windows_in_bits_per_second_with_gaps_and_resets():
     assert r.add(0.5, None) is None          # interface gone
     assert r.add(0.6, (10 ** 9, 0)) is None
     assert r.add(0.7, (10 ** 9 + 250, 0)) == pytest.approx(20000.0)
-    assert r.last() == pytest.approx(20000.0)
+    assert r.last() == pytest.approx(20000.0) and r.last_end() == 0.7
     assert r.mean(0.7, 0.45) == pytest.approx((10000.0 + 20000.0) / 2)
     assert r.peak(0.7, 1.0) == pytest.approx(100000.0)
     assert math.isnan(r.mean(100.0, 1.0))
@@ -111,6 +112,14 @@ def test_interface_choice(peer, configured, expected):
     assert (c.interface, c.reason) == expected
 
 
+def test_a_point_to_point_device_whose_remote_end_is_the_peer():
+    # the testbed's TUN device: 10.77.0.1 peer 10.77.0.2/32 (no subnet contains the peer)
+    table = {'lo': [('127.0.0.1', '255.0.0.0')], 'bp-r': [('10.77.0.1', '255.255.255.255', '10.77.0.2')]}
+    assert choose_interface('10.77.0.2', table, None) == Choice('bp-r', 'point-to-point')
+    assert choose_interface('10.77.0.1', table, None) == Choice('lo', 'local address')
+    assert choose_interface('10.77.0.3', table, None).interface == ''
+
+
 def test_no_interface_fits():
     assert choose_interface('8.8.8.8', {'eth0': [('192.168.1.10', '255.255.255.0')]}, None).interface == ''
 
@@ -121,20 +130,22 @@ def test_netifaces_table_from_a_fake_module():
 
         @staticmethod
         def interfaces():
-            return ['lo', 'eth0', 'can0']
+            return ['lo', 'eth0', 'can0', 'tun0']
 
         @staticmethod
         def ifaddresses(name):
             return {'lo': {2: [{'addr': '127.0.0.1', 'netmask': '255.0.0.0'}]},
                     'eth0': {2: [{'addr': '192.168.1.10', 'netmask': '255.255.255.0'}], 10: [{'addr': 'fe80::1'}]},
-                    'can0': {}}[name]
+                    'can0': {},
+                    'tun0': {2: [{'addr': '10.77.0.1', 'netmask': '255.255.255.255', 'peer': '10.77.0.2'}]}}[name]
 
         @staticmethod
         def gateways():
             return {'default': {2: ('192.168.1.1', 'eth0')}}
 
     table, default = netifaces_table(Fake)
-    assert table == {'lo': [('127.0.0.1', '255.0.0.0')], 'eth0': [('192.168.1.10', '255.255.255.0')], 'can0': []}
+    assert table == {'lo': [('127.0.0.1', '255.0.0.0')], 'eth0': [('192.168.1.10', '255.255.255.0')], 'can0': [],
+                     'tun0': [('10.77.0.1', '255.255.255.255', '10.77.0.2')]}
     assert default == 'eth0'
 
 
@@ -155,6 +166,21 @@ def test_iperf3_success_uses_the_received_rate():
     assert r.ok and r.bits_per_second == 7.9e8 and r.bytes_sent == 1000000 and r.seconds == 0.0102
 
 
+def test_iperf3_bytes_include_the_omitted_seconds():
+    data = dict(GOOD, intervals=[{'sum': {'bytes': 3000000, 'omitted': True}},
+                                 {'sum': {'bytes': 1000000, 'omitted': False}}])
+    r = parse_iperf3_json(json.dumps(data))
+    assert r.ok and r.bytes_sent == 4000000 and r.bits_per_second == 7.9e8
+
+
+def test_the_probe_is_time_bounded_with_omitted_slow_start_and_paced_to_its_byte_cap():
+    settings = ProbeSettings(seconds=2, omit=2, max_bytes=50000000, timeout=8.0)
+    argv = iperf3_command('iperf3', '10.0.0.2', 5201, settings)
+    assert argv[argv.index('-t') + 1] == '2' and argv[argv.index('-O') + 1] == '2'
+    assert argv[argv.index('-b') + 1] == '100000000' and settings.cap == 100000000   # 50 MB over 4 s
+    assert '-n' not in argv and '-J' in argv and argv[argv.index('--connect-timeout') + 1] == '4000'
+
+
 @pytest.mark.parametrize('text,fragment', [
     (json.dumps({'start': {}, 'intervals': [], 'end': {},
                  'error': 'unable to connect to server: Connection refused'}), 'Connection refused'),
@@ -170,21 +196,23 @@ def test_iperf3_errors_become_results(text, fragment):
 
 
 def test_run_probe_never_raises():
+    settings = ProbeSettings(seconds=1, omit=1, max_bytes=1000, timeout=4.0)
+
     def timeout(argv, t):
         raise subprocess.TimeoutExpired(argv, t)
 
     def good(argv, t):
-        assert argv == iperf3_command('iperf3', '10.0.0.2', 5201, 1000, 4.0)
-        assert argv[argv.index('-n') + 1] == '1000' and '-J' in argv
+        assert argv == iperf3_command('iperf3', '10.0.0.2', 5201, settings) and t == 4.0
         return subprocess.CompletedProcess(argv, 0, json.dumps(GOOD), '')
 
     def crash(argv, t):
         return subprocess.CompletedProcess(argv, 1, '', 'iperf3: error - bad\n')
 
-    assert 'within 4 s' in run_probe('10.0.0.2', 5201, 1000, 4.0, runner=timeout).error
-    assert run_probe('10.0.0.2', 5201, 1000, 4.0, runner=good).ok
-    assert run_probe('10.0.0.2', 5201, 1000, 4.0, runner=crash).error == 'iperf3 exited with 1: iperf3: error - bad'
-    r = run_probe('127.0.0.1', 5201, 1000, 1.0, executable='/nonexistent/iperf3')
+    assert 'within 4 s' in run_probe('10.0.0.2', 5201, settings, 'iperf3', runner=timeout).error
+    assert run_probe('10.0.0.2', 5201, settings, 'iperf3', runner=good).ok
+    assert run_probe('10.0.0.2', 5201, settings, 'iperf3', runner=crash).error == \
+        'iperf3 exited with 1: iperf3: error - bad'
+    r = run_probe('127.0.0.1', 5201, settings, '/nonexistent/iperf3')
     assert not r.ok and 'cannot run' in r.error
 
 
@@ -210,6 +238,13 @@ def test_passive_estimate_decays_towards_proven_usage_and_is_raised_by_it():
     assert b.estimate(200.0, 0.0) == (5e6, 0.0, 'probe')
 
 
+def test_only_usage_since_the_probe_counts_for_the_passive_estimate():
+    b = BandwidthEstimator(SETTINGS)
+    assert b.usage_span(50.0) == 10.0                   # no probe yet: the whole passive window
+    b.probed(100.0, 1e6)
+    assert b.usage_span(100.0) == 0.0 and b.usage_span(104.0) == 4.0 and b.usage_span(130.0) == 10.0
+
+
 def test_r_bw_is_eq_4_1_with_a_floored_c_bw():
     assert r_bw(8e6, 2e6, 1000.0) == 4.0
     assert r_bw(8e6, 0.0, 1000.0) == 8000.0             # idle link: finite, A_bw / floor
@@ -227,3 +262,6 @@ def test_the_shipped_config_is_valid_and_a_missing_parameter_is_named(workspace)
         monitor_config.from_section(Section(data, 'x'))
     with pytest.raises(ConfigError, match='peer: must differ'):
         monitor_config.from_section(Section(dict(load_yaml(path), peer='robot'), 'x'))
+    with pytest.raises(ConfigError, match=r'probe_timeout: must be > probe_seconds \+ probe_omit \(4 s\)'):
+        monitor_config.from_section(Section(dict(load_yaml(path), probe_timeout=4.0), 'x'))
+    assert (cfg.probe.seconds, cfg.probe.omit, cfg.probe.cap) == (2, 2, 100000000)

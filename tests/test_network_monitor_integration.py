@@ -26,7 +26,7 @@ def params(workspace, **changes):
 def monitors(ros, workspace):
     port = free_port()
     common = dict(peer_address='127.0.0.1', echo_rate=10.0, publish_rate=5.0, probe_interval=0.0,
-                  probe_bytes=200000, probe_timeout=5.0)
+                  probe_seconds=1, probe_omit=0, probe_bytes=2000000, probe_timeout=5.0)
     ros.master.call('setParam', '/nm_robot', params(workspace, name='robot', peer='cloud', iperf3_server=False,
                                                     probe_port=port, **common))
     ros.master.call('setParam', '/nm_cloud', params(workspace, name='cloud', peer='robot', iperf3_server=True,
@@ -65,7 +65,9 @@ def test_profile_now_with_a_probe_measures_a_bw(monitors):
     call = rospy.ServiceProxy('/nm_robot/profile_now', ProfileNow)
     r = wait_until(lambda: (lambda x: x if x.success else None)(call(probe=True)), 30, 'a successful probe')
     p = r.profile
-    assert p.a_bw > 0 and p.a_bw_method == 'probe' and p.probe_bytes >= 200000 and p.a_bw_age < 2.0
+    # paced to the byte cap on loopback: 2 MB in 1 s (16 Mbit/s), in iperf3's 128 KiB writes
+    assert p.a_bw > 0 and p.a_bw_method == 'probe' and 1000000 <= p.probe_bytes <= 2000000 + 131072
+    assert p.a_bw <= 1.25 * 16e6 and p.a_bw_age < 2.0
     assert math.isfinite(p.r_bw) and p.r_bw > 0
     quiet = call(probe=False)
     assert quiet.success and quiet.profile.probe_bytes == p.probe_bytes

@@ -131,15 +131,15 @@ class Monitor:
 
     # ---------------------------------------------------------------- A_bw
     def probe(self) -> Optional[ProbeResult]:
-        """One probe unless another is running (then None after waiting for it at most probe_timeout)."""
-        if not self.probe_lock.acquire(timeout=self.cfg.probe_timeout + 1.0):
+        """One probe unless another is running (then None after waiting for it at most probe_timeout + 1 s)."""
+        if not self.probe_lock.acquire(timeout=self.cfg.probe.timeout + 1.0):
             return None
         try:
             with self.lock:
                 self.probing = True
                 self.sampler.gap()
-            result = run_probe(self.cfg.peer_address, self.cfg.probe_port, self.cfg.probe_bytes,
-                               self.cfg.probe_timeout, self.cfg.iperf3_executable)
+            result = run_probe(self.cfg.peer_address, self.cfg.probe_port, self.cfg.probe,
+                               self.cfg.iperf3_executable)
             with self.lock:
                 self.probing = False
                 self.sampler.gap()
@@ -153,6 +153,17 @@ class Monitor:
         finally:
             self.probe_lock.release()
 
+    def wait_for_usage(self, since: float) -> None:
+        """Wait until a C_bw window ends after ``since`` (the probe's end: the windows during a probe are
+        dropped, and a probe longer than c_bw_span would leave C_bw unknown), at most 3 sample periods."""
+        deadline = since + 3.0 * self.cfg.sample_period
+        while time.monotonic() < deadline:
+            with self.lock:
+                if self.sampler.last_end() > since:
+                    return
+            if self.stop.wait(self.cfg.sample_period / 4.0):
+                return
+
     # ---------------------------------------------------------------- profile
     def profile(self) -> NetworkProfile:
         now = time.monotonic()
@@ -161,7 +172,7 @@ class Monitor:
             link = link_state(self.echo.summary(now), now, cfg.alive_timeout, self.bridge,
                               cfg.link_quality_timeout)
             c_bw = self.sampler.mean(now, cfg.c_bw_span)
-            peak = self.sampler.peak(now, cfg.passive.window)
+            peak = self.sampler.peak(now, self.estimator.usage_span(now))
             a_bw, age, method = self.estimator.estimate(now, peak)
             probe_bytes = self.probe_bytes
         msg = NetworkProfile(peer=cfg.peer, alive=link.alive, rtt=link.rtt, rtt_spread=link.rtt_spread,
@@ -175,6 +186,7 @@ class Monitor:
         if not req.probe:
             return ProfileNowResponse(profile=self.profile(), success=True, message='no probe requested')
         result = self.probe()
+        self.wait_for_usage(time.monotonic())
         if result is None:
             return ProfileNowResponse(profile=self.profile(), success=False, message='another probe is running')
         if not result.ok:

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 from cnr_params import Section
 from network_monitor.core.estimate import PassiveSettings
+from network_monitor.core.probe import ProbeSettings
 
 
 @dataclass
@@ -26,8 +27,7 @@ class MonitorConfig:
     c_bw_span: float
     c_bw_floor: float
     probe_interval: float
-    probe_bytes: int
-    probe_timeout: float
+    probe: ProbeSettings
     probe_port: int
     iperf3_executable: str
     iperf3_server: bool
@@ -65,8 +65,10 @@ def from_section(s: Section) -> MonitorConfig:
         c_bw_span=s.number('c_bw_span', positive=True),
         c_bw_floor=s.number('c_bw_floor', positive=True),
         probe_interval=s.number('probe_interval', nonnegative=True),
-        probe_bytes=s.integer('probe_bytes', minimum=1),
-        probe_timeout=s.number('probe_timeout', positive=True),
+        probe=ProbeSettings(seconds=s.integer('probe_seconds', minimum=1),
+                            omit=s.integer('probe_omit', minimum=0),
+                            max_bytes=s.integer('probe_bytes', minimum=1),
+                            timeout=s.number('probe_timeout', positive=True)),
         probe_port=s.integer('probe_port', minimum=1, maximum=65535),
         iperf3_executable=s.string('iperf3_executable'),
         iperf3_server=s.boolean('iperf3_server'),
@@ -82,6 +84,9 @@ def from_section(s: Section) -> MonitorConfig:
         raise s.error('peer', f'must differ from name ({cfg.name!r})')
     if cfg.reply_timeout >= cfg.window:
         raise s.error('reply_timeout', f'must be < window ({cfg.window:g} s), got {cfg.reply_timeout:g}')
+    if cfg.probe.timeout <= cfg.probe.seconds + cfg.probe.omit:
+        raise s.error('probe_timeout', f'must be > probe_seconds + probe_omit '
+                                       f'({cfg.probe.seconds + cfg.probe.omit} s), got {cfg.probe.timeout:g}')
     if cfg.c_bw_span < cfg.sample_period:
         raise s.error('c_bw_span', f'must be >= sample_period ({cfg.sample_period:g} s)')
     return cfg

@@ -1,8 +1,10 @@
 """A_bw between probes (passive, no probe bytes) and R_bw = A_bw / C_bw (thesis Eq. 4-1).
 
 Passive estimate. A probe measures A_p at time t_p. Afterwards nothing is sent; the only evidence is the
-robot's own traffic, whose peak over the last ``passive_window`` seconds (P) proves the link carried at
-least that much. The estimate therefore decays from the probe value towards what is proven::
+robot's own traffic, whose peak since the probe, over at most the last ``window`` seconds (P,
+:meth:`BandwidthEstimator.usage_span`), proves the link carried at least that much. Usage from before the
+probe is older than the probe and does not count (it once replaced a fresh 1 Mbit/s probe by the 26 Mbit/s
+the link carried before its rate dropped). The estimate therefore decays from the probe value towards what is proven::
 
     L    = max(P, floor_fraction * A_p)                    # lower bound: proven usage, or a floor
     A(t) = L + (A_p - L) * 2 ** (-(t - t_p) / half_life)   # half of the unproven part gone per half-life
@@ -49,8 +51,13 @@ class BandwidthEstimator:
         self.probe_value = bits_per_second
         self.probe_time = now
 
+    def usage_span(self, now: float) -> float:
+        """Seconds back from ``now`` whose usage counts for P: since the probe, at most ``window``."""
+        return min(self.settings.window, max(0.0, now - self.probe_time))
+
     def estimate(self, now: float, peak_usage: float) -> Tuple[float, float, str]:
-        """(A_bw [bit/s], age [s], method) at ``now`` given the peak usage P (NaN if unknown)."""
+        """(A_bw [bit/s], age [s], method) at ``now`` given the peak usage P over :meth:`usage_span` (NaN if
+        unknown)."""
         if self.probe_value is None:
             return math.nan, math.nan, 'none'
         s = self.settings

@@ -1,8 +1,10 @@
 """Which network interface carries the traffic to the peer (C_bw is measured there).
 
 Order: a configured interface name wins; a peer address that is loopback or one of this host's own
-addresses → the loopback interface; else the interface whose IPv4 subnet contains the peer's address
-(the longest prefix if several); else the default-gateway interface; else none.
+addresses → the loopback interface; else a point-to-point interface whose remote end is the peer (a TUN,
+PPP or VPN device: its own address has a /32 mask, so no subnet contains the peer — the testbed's devices);
+else the interface whose IPv4 subnet contains the peer's address (the longest prefix if several); else the
+default-gateway interface; else none.
 
 The interface table comes from netifaces (:func:`netifaces_table`), or from a plain dict in tests.
 """
@@ -12,13 +14,15 @@ import ipaddress
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Tuple
 
-Table = Dict[str, List[Tuple[str, str]]]   # interface -> [(IPv4 address, netmask)]
+# interface -> [(IPv4 address, netmask)] or [(IPv4 address, netmask, point-to-point peer address)]
+Table = Dict[str, List[Tuple[str, ...]]]
 
 
 @dataclass
 class Choice:
     interface: str     # '' when nothing fits
-    reason: str        # 'configured' | 'loopback' | 'local address' | 'subnet' | 'default gateway' | 'none'
+    reason: str        # 'configured' | 'loopback' | 'local address' | 'point-to-point' | 'subnet' |
+                       # 'default gateway' | 'none'
 
 
 def netifaces_table(netifaces_module) -> Tuple[Table, Optional[str]]:
@@ -27,9 +31,18 @@ def netifaces_table(netifaces_module) -> Tuple[Table, Optional[str]]:
     af_inet = netifaces_module.AF_INET
     for name in netifaces_module.interfaces():
         entries = netifaces_module.ifaddresses(name).get(af_inet, [])
-        table[name] = [(e['addr'], e.get('netmask', '255.255.255.255')) for e in entries if 'addr' in e]
+        table[name] = [(e['addr'], e.get('netmask', '255.255.255.255'))
+                       + ((e['peer'],) if e.get('peer') and e['peer'] != e['addr'] else ())
+                       for e in entries if 'addr' in e]
     default = netifaces_module.gateways().get('default', {}).get(af_inet)
     return table, (default[1] if default else None)
+
+
+def _same(address: str, peer: ipaddress.IPv4Address) -> bool:
+    try:
+        return ipaddress.IPv4Address(address) == peer
+    except ValueError:
+        return False
 
 
 def choose_interface(peer_address: str, table: Table, default_interface: Optional[str],
@@ -38,7 +51,7 @@ def choose_interface(peer_address: str, table: Table, default_interface: Optiona
 
     Args:
         peer_address: the peer's IPv4 address (already resolved).
-        table: interface -> [(address, netmask)].
+        table: interface -> [(address, netmask)] or [(address, netmask, point-to-point peer)].
         default_interface: the default-gateway interface, if any.
         configured: an interface name from the configuration ('' for automatic).
     """
@@ -49,15 +62,18 @@ def choose_interface(peer_address: str, table: Table, default_interface: Optiona
     except ValueError:
         peer = None
     loopback = next((n for n, addrs in table.items()
-                     if any(ipaddress.IPv4Address(a).is_loopback for a, _ in addrs)), None)
+                     if any(ipaddress.IPv4Address(e[0]).is_loopback for e in addrs)), None)
     if peer is not None:
         if peer.is_loopback and loopback:
             return Choice(loopback, 'loopback')
-        if loopback and any(ipaddress.IPv4Address(a) == peer for addrs in table.values() for a, _ in addrs):
+        if loopback and any(ipaddress.IPv4Address(e[0]) == peer for addrs in table.values() for e in addrs):
             return Choice(loopback, 'local address')
+        for name, addrs in table.items():
+            if any(len(e) > 2 and _same(e[2], peer) for e in addrs):
+                return Choice(name, 'point-to-point')
         best: Optional[Tuple[int, str]] = None
         for name, addrs in table.items():
-            for addr, mask in addrs:
+            for addr, mask, *_ in addrs:
                 try:
                     net = ipaddress.IPv4Network(f'{addr}/{mask}', strict=False)
                 except ValueError:

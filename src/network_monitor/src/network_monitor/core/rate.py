@@ -85,6 +85,10 @@ class RateSampler:
         """The newest window's rate in bit/s (NaN if none)."""
         return self._rates[-1][1] if self._rates else math.nan
 
+    def last_end(self) -> float:
+        """When the newest window ended (-inf if none)."""
+        return self._rates[-1][0] if self._rates else -math.inf
+
     def mean(self, now: float, span: float) -> float:
         """Mean rate of the windows ending in ``[now - span, now]`` (NaN if none)."""
         rates = [r for t, r in self._rates if t >= now - span]

@@ -1,0 +1,187 @@
+"""Accuracy and cost of network_monitor's profile on the testbed (launch_scripts/bench_profile.sh; root).
+
+    /usr/bin/python3 -m cnr_benchmarks.profile_bench [--quick] [--reps N] [--name bp] [--out bench_results]
+
+Brings up its own testbed instance (``--name``: namespaces NAME-robot / NAME-cloud, never the lead's ``cnr``),
+a master on each host joined by multimaster_bridge (``/network_monitor/*`` and the load topic allowed) and a
+network_monitor on each (config/network_monitor.yaml; overlays: the instance's addresses, the cloud's
+name/peer, ``probe_interval: 0`` so no periodic probe disturbs the measurements). The measuring node
+(:mod:`cnr_benchmarks.profile_worker`) runs on the robot; the first cell is the unshaped, undelayed
+baseline. Writes ``profile.tsv`` (every repetition) and ``profile.md`` (table, command, date, machine).
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import os
+import platform
+import sys
+import tempfile
+import time
+from typing import List, Tuple
+
+from cnr_benchmarks import report
+
+RTTS = (0, 20, 50, 100, 150)          # ms, set as two one-way halves
+RATES = (1, 3.4, 10, 50)              # Mbit/s on both directions
+QUICK_RTTS = (0, 150)
+QUICK_RATES = (1, 50)
+REPS = 2
+LOAD_FRACTION = 0.5                   # background load during the passive phase, of the set rate
+LOAD_HZ = 20.0                        # its messages per second
+PASSIVE_AGE = 10.0                    # s after the probe the passive estimate is read
+BRIDGE_SETTINGS = dict(allow_topics=['/network_monitor/*', '/bench_profile/*'])
+
+HELP_GRID = (f'Grid: RTT {", ".join(map(str, RTTS))} ms x rate {", ".join(map(str, RATES))} Mbit/s, {REPS} '
+             f'repetitions (--quick: RTT {", ".join(map(str, QUICK_RTTS))} ms x rate '
+             f'{", ".join(map(str, QUICK_RATES))} Mbit/s, 1 repetition), after an unshaped 0 ms baseline cell. '
+             f'Passive phase: {LOAD_FRACTION:g} x rate of background load in {LOAD_HZ:g} messages/s, estimate '
+             f'read {PASSIVE_AGE:g} s after the probe.')
+
+
+def cells(quick: bool) -> List[Tuple[float, float]]:
+    rtts, rates = (QUICK_RTTS, QUICK_RATES) if quick else (RTTS, RATES)
+    return [(0.0, 0.0)] + [(float(r), float(b)) for r in rtts for b in rates]
+
+
+def write_yaml(path: str, data: dict) -> str:
+    import yaml
+    with open(path, 'w') as f:
+        yaml.safe_dump(data, f)
+    return path
+
+
+def follow(proc, printed: int) -> int:
+    """Print the lines ``proc`` wrote since ``printed`` characters; returns the new count."""
+    text = proc.output()
+    end = text.rfind('\n') + 1
+    if end > printed:
+        sys.stdout.write(text[printed:end])
+        sys.stdout.flush()
+        return end
+    return printed
+
+
+def measure(args: argparse.Namespace, grid: List[Tuple[float, float]], reps: int, tsv: str, work: str) -> None:
+    from cnr_harness import wait_until
+    from cnr_testbed.api import Testbed
+    from cnr_testbed.cli import overrides
+    from cnr_testbed.rosside import RosSide, start_bridge
+    tb = Testbed(args.config, overrides(args.name))
+    secret = os.path.join(work, 'secret')
+    with open(secret, 'w') as f:
+        f.write(os.urandom(16).hex())
+    robot = cloud = None
+    try:
+        tb.up()
+        report.progress(f"testbed '{args.name}' up: robot {tb.robot_address} ({tb.namespace('robot')}), "
+                        f"cloud {tb.cloud_address} ({tb.namespace('cloud')})")
+        robot, cloud = RosSide(tb, 'robot', log_dir=work), RosSide(tb, 'cloud', log_dir=work)
+        robot.start_master()
+        cloud.start_master()
+        bridges = [start_bridge(robot, cloud, secret, **BRIDGE_SETTINGS),
+                   start_bridge(cloud, robot, secret, **BRIDGE_SETTINGS)]
+        wait_until(lambda: 'peer cloud is up' in bridges[0].output() and 'peer robot is up' in bridges[1].output(),
+                   60, 'the bridges to see each other')
+        common = dict(probe_interval=0.0)
+        overlays = {'robot': dict(common, peer_address=tb.cloud_address),
+                    'cloud': dict(common, name='cloud', peer='robot', peer_address=tb.robot_address)}
+        for side in (robot, cloud):
+            path = write_yaml(os.path.join(work, f'network_monitor_{side.side}.yaml'), overlays[side.side])
+            side.run(['roslaunch', 'network_monitor', 'network_monitor.launch', f'overlay:={path}'],
+                     f'network_monitor_{side.side}')
+        cloud.run([sys.executable, '-m', 'cnr_benchmarks.profile_worker', '--sink'], 'sink')
+        report.progress('masters, bridges, monitors and load sink started; measuring')
+        worker = robot.run([sys.executable, '-m', 'cnr_benchmarks.profile_worker',
+                            '--testbed-config', args.config, '--testbed-name', args.name,
+                            '--cells', ','.join(f'{r:g}:{b:g}' for r, b in grid), '--reps', str(reps),
+                            '--out', tsv, '--load-fraction', str(LOAD_FRACTION), '--load-hz', str(LOAD_HZ),
+                            '--passive-age', str(PASSIVE_AGE)], 'worker')
+        printed = 0
+        while worker.poll() is None:
+            printed = follow(worker, printed)
+            time.sleep(0.5)
+        follow(worker, printed)
+        if worker.returncode != 0:
+            raise RuntimeError(f'the measuring node exited with {worker.returncode} (see {worker.log_path})')
+    finally:
+        for side in (cloud, robot):
+            if side is not None:
+                side.stop()
+        tb.down()
+
+
+def write_outputs(tsv: str, out_dir: str, command: str, started: datetime.datetime, wall_s: float,
+                  machine: str) -> str:
+    import csv
+    from cnr_benchmarks.core import profile as core
+    with open(tsv) as f:
+        samples = [core.Sample.from_row(row) for row in csv.DictReader(f, delimiter='\t')]
+    base = core.baseline_rtt_ms(samples)
+    cells_ = core.summarize_cells(samples, base)
+    met = core.totals(cells_)
+    from cnr_params import load_yaml
+    monitor = load_yaml(os.path.join(report.WS, 'config', 'network_monitor.yaml'))
+    probe = (f"iperf3 -t {monitor['probe_seconds']} -O {monitor['probe_omit']}, at most "
+             f"{monitor['probe_bytes'] / 1e6:g} MB")
+    reps = max((c.reps for c in cells_), default=0)
+    md = ['# network_monitor: profile accuracy and probe cost on the testbed', '',
+          f'Command: `{command}` — {started:%Y-%m-%d %H:%M}, {wall_s / 60:.1f} min, {reps} repetition(s) per cell. '
+          f'Machine: {machine}.', '',
+          f'Baseline RTT (0 ms set, unshaped; ROS publish/echo across the bridge plus the emulator): '
+          f'**{base:.2f} ms**; RTT error = measured − (set + baseline).', '',
+          'Values: mean [min, max] over the repetitions. RTT: the profile\'s median over its '
+          f"{monitor['window']:g} s echo window on an idle link. A_bw: `~profile_now` with a probe ({probe}, "
+          'config/network_monitor.yaml); error against the set rate (the emulator itself delivers about 3.5 % '
+          'less, bench_results/testbed.md). Passive: the profile\'s A_bw '
+          f'{PASSIVE_AGE:g} s after the probe with {LOAD_FRACTION:g} × rate of background load (a ROS topic of '
+          f'{LOAD_HZ:g} messages/s across the bridge). Probe cost: bytes the emulator delivered in both '
+          'directions during the call (data and ACKs) and the caller\'s wall time.', '',
+          report.markdown_table(core.TABLE_HEADER, core.table_rows(cells_)), '',
+          f"Targets met: RTT ±{core.RTT_TARGET_MS:g} ms in {met['rtt'][0]}/{met['rtt'][1]} cells, "
+          f"A_bw ±{core.A_BW_TARGET_PCT:g} % in {met['a_bw'][0]}/{met['a_bw'][1]}, passive "
+          f"±{core.PASSIVE_TARGET_PCT:g} % in {met['passive'][0]}/{met['passive'][1]} (every repetition within); "
+          f"the delay error within ±{core.RTT_TARGET_MS:g} ms in {met['delay'][0]}/{met['delay'][1]}.", '',
+          'Delay error = measured − (set + the RTT measured at 0 ms and the same rate): the RTT error without the '
+          'serialisation of the ping and pong segments at the rate (about 2 × 120 bytes, 1.9 ms at 1 Mbit/s), '
+          'which is part of the link\'s real RTT but not of the delay set on the emulator.', '']
+    text = '\n'.join(md)
+    report.write_text(os.path.join(out_dir, 'profile.md'), text)
+    return text
+
+
+def machine_note() -> str:
+    load = ', '.join(f'{x:.1f}' for x in os.getloadavg())
+    return f'{platform.node()}, {os.cpu_count()} cores, Linux {platform.release()}, load average {load}'
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description='network_monitor profile accuracy and probe cost on the testbed. '
+                                 + HELP_GRID)
+    ap.add_argument('--quick', action='store_true', help='the reduced grid, 1 repetition')
+    ap.add_argument('--reps', type=int, help=f'repetitions per cell (default {REPS}, --quick 1)')
+    ap.add_argument('--name', default='bp', help='testbed instance (namespaces NAME-robot, NAME-cloud)')
+    ap.add_argument('--out', default=report.DEFAULT_OUT)
+    ap.add_argument('--config', default=os.path.join(report.WS, 'config', 'testbed.yaml'))
+    args = ap.parse_args(argv)
+    reps = args.reps if args.reps is not None else (1 if args.quick else REPS)
+    if reps < 1:
+        print(f'bench_profile: --reps must be >= 1, got {reps}', file=sys.stderr)
+        return 2
+    grid = cells(args.quick)
+    os.makedirs(args.out, exist_ok=True)
+    tsv = os.path.join(args.out, 'profile.tsv')      # an earlier one is kept as profile.prev.tsv (TsvLog)
+    work = tempfile.mkdtemp(prefix='bench_profile-')
+    started, t0 = datetime.datetime.now(), time.monotonic()
+    machine = machine_note()
+    report.progress(f'bench_profile: {len(grid)} cells x {reps} repetition(s); node logs in {work}')
+    measure(args, grid, reps, tsv, work)
+    wall = time.monotonic() - t0
+    command = 'launch_scripts/bench_profile.sh' + ''.join(f' {a}' for a in (argv if argv is not None else sys.argv[1:]))
+    print(write_outputs(tsv, args.out, command, started, wall, machine))
+    print(f'wrote {tsv} and {os.path.join(args.out, "profile.md")} in {wall / 60:.1f} min')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
