@@ -73,6 +73,8 @@ class TwoHostMission:
         self.link, self.trace, self.link_map = link, trace, link_map
         settings = Section.from_file(os.path.join(ws_config, 'two_host.yaml')).section('two_host')
         self.relay_drain_timeout = settings.number('relay_drain_timeout', nonnegative=True)
+        monitors = settings.section('network_monitor')
+        self.monitor_settings = {side: dict(monitors.section(side).data) for side in ('robot', 'cloud')}
         self.testbed = Testbed(os.path.join(ws_config, 'testbed.yaml'))
         self.owns_testbed = False
         self.robot: Optional[RosSide] = None
@@ -107,7 +109,8 @@ class TwoHostMission:
 
     def _monitor_overlay(self, side: RosSide, peer: RosSide) -> str:
         return self._write_yaml(f'network_monitor_{side.side}.yaml',
-                                dict(name=side.side, peer=peer.side, peer_address=peer.address))
+                                dict(self.monitor_settings[side.side], name=side.side, peer=peer.side,
+                                     peer_address=peer.address))
 
     def _robot_cpu(self) -> List[str]:
         """The prefix that runs a command inside the robot's CPU cgroup (cnr_testbed.cpucap; it says in one line
