@@ -158,7 +158,7 @@ def test_v2_files_on_a_fake_tree(tmp_path):
 
 def test_repository_config_robot_cpu():
     rc = load_testbed(TESTBED_YAML).robot_cpu
-    assert rc.enabled and rc.slowdown == pytest.approx(8.6) and rc.period_us == 10000
+    assert rc.enabled and rc.slowdown == pytest.approx(3.0) and rc.period_us == 10000
     assert core.quota_us(rc.cpus, rc.period_us) >= core.MIN_QUOTA_US
 
 
@@ -166,7 +166,7 @@ def test_repository_config_robot_cpu():
     (lambda r: r.pop('slowdown'), 'testbed.robot_cpu.slowdown: missing'),
     (lambda r: r.pop('enabled'), 'testbed.robot_cpu.enabled: missing'),
     (lambda r: r.update(slowdown=0), 'testbed.robot_cpu.slowdown: must be > 0'),
-    (lambda r: r.update(period_us=5000), 'testbed.robot_cpu.period_us: quota'),
+    (lambda r: r.update(period_us=2000), 'testbed.robot_cpu.period_us: quota'),
     (lambda r: r.update(period_us=2000000), 'testbed.robot_cpu.period_us: must be <= 1000000'),
 ])
 def test_bad_robot_cpu_config(tmp_path, change, message):

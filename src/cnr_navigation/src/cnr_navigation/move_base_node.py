@@ -199,7 +199,11 @@ class MoveBaseNode:
     def _publish_cmd(self, cmd: Velocity) -> None:
         msg = Twist()
         msg.linear.x, msg.angular.z = cmd
-        self.cmd_pub.publish(msg)
+        try:
+            self.cmd_pub.publish(msg)
+        except rospy.ROSException:
+            if not rospy.is_shutdown():     # the topic closes under a goal that is still running at shutdown
+                raise
 
     def _to_global(self, target: PoseStamped) -> Optional[PoseStamped]:
         """``goalToGlobalFrame``: the pose in the global frame (latest transform), None if tf has none."""
