@@ -42,7 +42,7 @@ from cnr_mission.core.report import write_summary
 from cnr_params.config import EXIT_CONFIG, ConfigError, Section, load_yaml
 from cnr_testbed import cpucap
 from cnr_testbed.api import Testbed, TestbedError
-from cnr_testbed.rosside import BRIDGE_PORT, RosSide
+from cnr_testbed.rosside import RosSide, bridge_config
 
 EXIT_INTERRUPTED = 130
 EXIT_NOT_FOUND = 3
@@ -98,14 +98,12 @@ class TwoHostMission:
             f.write(base64.b64encode(os.urandom(32)).decode() + '\n')
         return path
 
-    def _bridge_config(self, side: RosSide, peer: RosSide) -> str:
-        """The host's bridge file from config/ with this testbed's addresses and the placement's allow-lists."""
-        host_file = os.path.join(self.config, f'bridge_{side.side}.yaml')
-        cfg = load_yaml(host_file)
-        cfg.update(name=side.side, listen=f'{side.address}:{BRIDGE_PORT}',
-                   peers=[dict(name=peer.side, address=f'{peer.address}:{BRIDGE_PORT}')],
-                   allow_topics=self.placement.allow('topics'), allow_services=self.placement.allow('services'))
-        return self._write_yaml(f'bridge_{side.side}.yaml', cfg)
+    def _bridge_config(self, side: RosSide, peer: RosSide, secret: str) -> str:
+        """The host's bridge file: this testbed's addresses, the placement's allow-lists, config/'s deny lists."""
+        host = load_yaml(os.path.join(self.config, f'bridge_{side.side}.yaml'))
+        return bridge_config(side, peer, secret, allow_topics=self.placement.allow('topics'),
+                             allow_services=self.placement.allow('services'),
+                             deny_topics=host['deny_topics'], deny_services=host['deny_services'])
 
     def _monitor_overlay(self, side: RosSide, peer: RosSide) -> str:
         return self._write_yaml(f'network_monitor_{side.side}.yaml',
@@ -177,7 +175,7 @@ class TwoHostMission:
                      until='mission_monitor')
         for side, peer in ((self.robot, self.cloud), (self.cloud, self.robot)):
             host_args = ['cnr_mission', 'host.launch', f'host:={side.side}', *common,
-                         f'bridge_config:={self._bridge_config(side, peer)}', f'secret_file:={secret}',
+                         f'bridge_config:={self._bridge_config(side, peer, secret)}', f'secret_file:={secret}',
                          f'network_monitor_overlay:={self._monitor_overlay(side, peer)}',
                          *launch_args(self.placement, side.side)]
             relayed = self.placement.relayed()
