@@ -100,6 +100,8 @@ def test_every_measurement_arrives_once_in_order_across_an_outage_and_sender_kil
     stream.start('sender')
     stream.publish(30)
     wait_until(lambda: len(stream.got) >= 30, 30, '30 measurements relayed', stream.procs['sender'])
+    # the receiver delivers before the sender hears its ack: stop it only once all 30 are acknowledged
+    stream.sender_status(lambda s: s.acked_seq == 30 and s.queued == 0, 'the first 30 acknowledged')
 
     stream.stop('receiver')                                    # outage: the cloud side is gone
     stream.publish(50)

@@ -3,7 +3,8 @@
 Checks the issue's deadlines on an unshaped link: a new publisher reaches the other master in <= 0.5 s; during
 an outage the peer is lost in <= 2 s and its registrations are gone <= 3 s after the outage began; after the
 link returns the registrations are back in <= 1 s and a rospy subscriber receives again; stock tools work
-across; a stranger's heartbeats are ignored and logged; a local node is never shut down by a proxy.
+across; a stranger's heartbeats are ignored and logged; a local node is never shut down by a proxy; a stopped
+bridge leaves no proxy behind.
 """
 import os
 import subprocess
@@ -198,3 +199,13 @@ def test_a_subscriber_hears_the_publishers_of_both_hosts(bridged):
         echo = side.run(['rostopic', 'echo', '/chatter'], f'echo_{side.side}')
         wait_until(lambda: lines(echo, 'robot-side') >= 3 and lines(echo, 'cloud-side') >= 3, 20,
                  f'the {side.side} subscriber to hear both publishers')
+
+
+def test_a_stopped_bridge_leaves_no_proxy_behind(bridged):
+    tb, robot, cloud, procs = bridged
+    cloud.run(['rostopic', 'pub', '-r', '20', '/chatter', 'std_msgs/String', 'data: remote'], 'pub')
+    cloud_proxies = lambda: {n for n in publishers(robot, '/chatter') if n.startswith('/cloud/')}
+    wait_until(cloud_proxies, 20, 'the cloud publisher on the robot master')
+    robot.stop_proc(procs[0])            # SIGINT: its on_shutdown hook removes what it registered
+    assert procs[0].returncode == 0, log(procs[0])[-2000:]
+    assert not cloud_proxies(), 'the stopped bridge left its proxies registered'

@@ -24,7 +24,7 @@ from nav_msgs.srv import GetPlan, GetPlanResponse
 from std_srvs.srv import Empty, EmptyResponse
 
 import cnr_params
-from cnr_params.ros import init_node
+from cnr_params.ros import init_node, quiet_at_shutdown
 from cnr_navigation.cfg import DWAPlannerConfig, MoveBaseConfig
 from cnr_navigation.core.dwa import DWAController
 from cnr_navigation.core.geometry import IDENTITY, Pose2D
@@ -199,11 +199,7 @@ class MoveBaseNode:
     def _publish_cmd(self, cmd: Velocity) -> None:
         msg = Twist()
         msg.linear.x, msg.angular.z = cmd
-        try:
-            self.cmd_pub.publish(msg)
-        except rospy.ROSException:
-            if not rospy.is_shutdown():     # the topic closes under a goal that is still running at shutdown
-                raise
+        self.cmd_pub.publish(msg)
 
     def _to_global(self, target: PoseStamped) -> Optional[PoseStamped]:
         """``goalToGlobalFrame``: the pose in the global frame (latest transform), None if tf has none."""
@@ -244,6 +240,7 @@ class MoveBaseNode:
         rospy.loginfo(f'move_base: new goal ({p.x:.2f}, {p.y:.2f}) in {self.global_frame}')
         return True
 
+    @quiet_at_shutdown
     def _execute(self, goal: MoveBaseGoal) -> None:
         """The action's execute callback: ``MoveBase::executeCb``."""
         if not self._start_goal(goal.target_pose):
@@ -314,6 +311,8 @@ class MoveBaseNode:
                 else:
                     time.sleep(0.02)
             except Exception as exc:     # never let the planner thread die silently
+                if rospy.core.is_shutdown_requested():
+                    return                # e.g. a plan published onto a topic the shutdown closed
                 rospy.logerr_throttle(5.0, f'planner thread: {exc!r}')
                 time.sleep(0.1)
 

@@ -60,6 +60,25 @@ def init_node(name: str, **kwargs) -> None:
     signal.signal(signal.SIGTERM, handler)
 
 
+def quiet_at_shutdown(callback):
+    """Wrap a callback that rospy calls and guards itself (a subscriber callback, a service handler, an
+    actionlib execute callback) so that a ``ROSException`` raised once the shutdown has begun (a publish onto a
+    topic the shutdown already closed) ends it quietly. rospy and actionlib would log such an exception with
+    its traceback; :func:`init_node` already does this for exceptions that end a thread. Anything else, or
+    the same exception before the shutdown, propagates as before."""
+    import functools
+
+    @functools.wraps(callback)
+    def wrapper(*args, **kwargs):
+        try:
+            return callback(*args, **kwargs)
+        except rospy.ROSException:
+            if rospy.core.is_shutdown_requested():
+                return None
+            raise
+    return wrapper
+
+
 def call_with_timeout(func, timeout: float, *args, **kwargs):
     """Call ``func(*args, **kwargs)`` (e.g. a ``rospy.ServiceProxy`` to a module on another host), giving up
     after ``timeout`` wall seconds: the robot never waits on the cloud.

@@ -12,7 +12,7 @@ from cnr_maps.grid import MapcellGrid
 from cnr_maps.pose import yaw_to_quaternion
 from cnr_msgs.msg import CellStates
 from cnr_msgs.srv import NextGoal, NextGoalResponse
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import init_node, private_section, quiet_at_shutdown
 from global_goal_manager.core.policies import CellView, GoalManagerParams, read_params
 
 
@@ -50,9 +50,13 @@ class GoalManagerNode:
         goal.pose.position.x, goal.pose.position.y = cell.center_x, cell.center_y
         yaw = math.atan2(cell.center_y - req.robot_y, cell.center_x - req.robot_x)
         goal.pose.orientation = Quaternion(*yaw_to_quaternion(yaw))
-        self.pub.publish(goal)
+        self._announce(goal)
         return NextGoalResponse(success=True, message=f'cell {index} (col {cell.col}, row {cell.row})',
                                 policy=self.policy.name, cell=cell, goal=goal)
+
+    @quiet_at_shutdown
+    def _announce(self, goal: PoseStamped) -> None:
+        self.pub.publish(goal)
 
 
 @cnr_params.exit_on_config_error

@@ -14,7 +14,7 @@ from cnr_msgs.srv import (GetCell, GetCellResponse, GetCellStates, GetCellStates
                           GetMeasurementsResponse)
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.measurements import Measurement
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import init_node, private_section, quiet_at_shutdown
 from local_mapcell_manager.core.params import ManagerParams, read_params
 from local_mapcell_manager.core.store import CellBook, MeasurementStore
 
@@ -78,6 +78,7 @@ class ManagerNode:
             self._dirty = False
             self.pub.publish(self._states())
 
+    @quiet_at_shutdown
     def _on_measurement(self, msg: MergedMeasurement) -> None:
         values = (msg.x, msg.y, msg.temperature, msg.header.stamp.to_sec())
         if not all(math.isfinite(v) for v in values):

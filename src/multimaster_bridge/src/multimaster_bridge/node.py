@@ -131,6 +131,10 @@ class Bridge:
         self.last_node_refresh = -math.inf
         self.master_ok = True
         self.stopped = False
+        # rospy runs on_shutdown hooks before is_shutdown() turns true: the spin loop may still be in
+        # reconcile(). Registrations change only under this lock, and not at all once ``closing`` is set.
+        self.registry_lock = threading.Lock()
+        self.closing = False
         self.quality_pub = rospy.Publisher('link_quality', LinkQuality, queue_size=10)
 
     # ---------------------------------------------------------------- wire
@@ -269,6 +273,11 @@ class Bridge:
                               f'registrations')
 
     def reconcile(self) -> None:
+        with self.registry_lock:
+            if not self.closing:
+                self._reconcile()
+
+    def _reconcile(self) -> None:
         snap = self.snapshot
         if snap is None:
             return
@@ -351,7 +360,7 @@ class Bridge:
         next_poll = next_hb = next_q = time.monotonic()
         rospy.loginfo(f'bridge {self.cfg.name}: listening on {self.cfg.listen[0]}:{self.cfg.listen[1]}, '
                       f'peers ' + ', '.join(f'{p.name}@{p.host}:{p.port}' for p in self.cfg.peers))
-        while not rospy.is_shutdown():
+        while not rospy.is_shutdown() and not self.closing:
             now = time.monotonic()
             if now >= next_hb:
                 next_hb = max(next_hb + hb_period, now)
@@ -381,15 +390,17 @@ class Bridge:
 
     def shutdown(self) -> None:
         """Say goodbye and remove every registration this bridge made."""
-        with self.lock:
+        with self.registry_lock:
+            self.closing = True
+            with self.lock:
+                for peer in self.peers.values():
+                    self._send(peer, 'bye')
             for peer in self.peers.values():
-                self._send(peer, 'bye')
-        for peer in self.peers.values():
-            try:
-                self.master.apply(sorted(peer.registered), [])
-            except (OSError, xmlrpc.client.Error):
-                pass
-            peer.registered = set()
+                try:
+                    self.master.apply(sorted(peer.registered), [])
+                except (OSError, xmlrpc.client.Error):
+                    pass
+                peer.registered = set()
         self.stopped = True
         self.sock.close()
 
