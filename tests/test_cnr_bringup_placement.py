@@ -36,14 +36,14 @@ def test_hosts_of_each_named_placement(catalog):
 
 def test_allow_lists_follow_the_placement(catalog):
     allr = catalog.placement('all_robot')
-    assert allr.allow('topics') == sorted(catalog.always['topics'])     # only sim time and the monitors
-    assert allr.allow('services') == []
+    assert allr.allow('topics') == sorted(catalog.always['topics'])     # sim time, monitors, migration protocol
+    assert allr.allow('services') == sorted(catalog.always['services'])
     mb = catalog.placement('move_base_cloud')
     for t in ('/scan', '/odom', '/tf', '/mobile_base/commands/velocity', '/move_base/*', '/clock'):
         assert t in mb.allow('topics')
     assert '/merged_measurements' not in mb.allow('topics')
     aware = catalog.placement('paper_network_aware')
-    assert aware.allow('services') == ['/global_goal_manager/*']
+    assert aware.allow('services') == sorted(['/global_goal_manager/*'] + catalog.always['services'])
     assert '/cell_states' in aware.allow('topics') and '/mapcell_measurements' not in aware.allow('topics')
     normal = catalog.placement('paper_normal')
     assert '/mapcell_measurements' in normal.allow('topics') and '/move_base/*' in normal.allow('topics')

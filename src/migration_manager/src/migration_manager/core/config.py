@@ -1,0 +1,86 @@
+"""migration_manager settings from a :class:`cnr_params.Section` (config/migration.yaml, loaded into the
+manager's, each agent's and each managed instance's ``~migration`` namespace). No defaults here: a missing
+parameter is a one-line ConfigError naming it."""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Tuple
+
+from cnr_params import Section
+
+from migration_manager.core.lease import Grantor
+from migration_manager.core.plan import Timeouts
+
+
+@dataclass(frozen=True)
+class LeaseSettings:
+    duration: float
+    renew_period: float
+    margin: float
+
+    def grantor(self, module: str) -> Grantor:
+        return Grantor(module, self.duration, self.margin)
+
+
+@dataclass(frozen=True)
+class MigrationConfig:
+    hosts: Tuple[str, ...]
+    authority: str
+    modules: Tuple[str, ...]
+    lease: LeaseSettings
+    timeouts: Timeouts
+    control_call: float
+    replicate_period: float
+    status_period: float
+    failover: bool
+    hot_standby: Tuple[str, ...]
+    stop_timeout: float
+    restart_delay: float
+    log_dir: str
+
+    def other(self, host: str) -> str:
+        return next(h for h in self.hosts if h != host)
+
+
+def _names(s: Section, key: str, allowed: Tuple[str, ...] = ()) -> Tuple[str, ...]:
+    value = s.raw(key)
+    if not isinstance(value, list) or not all(isinstance(v, str) and v for v in value):
+        raise s.error(key, f'must be a list of names, got {value!r}')
+    if len(set(value)) != len(value):
+        raise s.error(key, 'names must not repeat')
+    bad = [v for v in value if allowed and v not in allowed]
+    if bad:
+        raise s.error(key, f'{", ".join(bad)} not among {", ".join(allowed)}')
+    return tuple(value)
+
+
+def from_section(s: Section) -> MigrationConfig:
+    hosts = _names(s, 'hosts')
+    if len(hosts) != 2:
+        raise s.error('hosts', f'must name two hosts (robot and cloud), got {list(hosts)}')
+    authority = s.string('authority', choices=hosts)
+    modules = _names(s, 'modules')
+    lease = s.section('lease')
+    ls = LeaseSettings(duration=lease.number('duration', positive=True),
+                       renew_period=lease.number('renew_period', positive=True),
+                       margin=lease.number('margin', minimum=0.0))
+    if ls.renew_period >= ls.duration / 2:
+        raise lease.error('renew_period', f'must be below half the lease duration ({ls.duration / 2:g} s), '
+                                          f'got {ls.renew_period:g}')
+    t = s.section('timeouts')
+    timeouts = Timeouts(start=t.number('start', positive=True), freeze=t.number('freeze', positive=True),
+                        promote=t.number('promote', positive=True))
+    agent = s.section('agent')
+    log_dir = agent.string('log_dir')
+    if not log_dir:
+        raise agent.error('log_dir', 'must not be empty')
+    return MigrationConfig(
+        hosts=hosts, authority=authority, modules=modules, lease=ls, timeouts=timeouts,
+        control_call=t.number('control_call', positive=True),
+        replicate_period=s.number('replicate_period', positive=True),
+        status_period=s.number('status_period', positive=True),
+        failover=s.boolean('failover'), hot_standby=_names(s, 'hot_standby', modules),
+        stop_timeout=agent.number('stop_timeout', positive=True),
+        restart_delay=agent.number('restart_delay', minimum=0.0),
+        log_dir=os.path.abspath(os.path.expanduser(log_dir)))

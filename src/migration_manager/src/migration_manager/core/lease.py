@@ -1,0 +1,174 @@
+"""Leases and terms: at most one active instance of a module at any moment (fencing), without synchronised
+clocks.
+
+The manager on the robot is the only grantor. Each module has a *term* (a number that only grows) and at most
+one *holder* (an instance: ``module@host``). An instance may produce output only while it holds a valid lease
+for the current term:
+
+- The holder asks for a renewal (``request``) every ``renew_period`` seconds, remembering the local monotonic
+  time ``t0`` at which it sent each request. When the grantor answers, the lease is valid until
+  ``t0 + duration`` on the *holder's* clock. Since ``t0`` precedes the grant, the holder's lease always ends no
+  later than the grantor believes it does: no clock synchronisation is needed, and a late or repeated answer
+  (queued during an outage) can only grant a lease that has already run out.
+- The grantor records ``valid_until = grant time + duration`` on its own clock. It gives the module to another
+  instance only when (a) the holder has confirmed it stopped (``release``: frozen for a planned migration), or
+  (b) ``valid_until + margin`` has passed (the holder is cut off and has demoted itself by then).
+- A promoted instance produces no output before its first renewal for the new term is answered; the grantor
+  answers renewals only for the current term and holder. A promotion that the grantor later rolled back can
+  therefore never produce output, even if the order reaches the instance late.
+
+``margin`` covers clock *rate* differences (monotonic clocks drift by ppm) and the time the holder needs to stop
+its outputs once its lease ends. These classes hold no ROS types and read no clock: callers pass ``now``
+(monotonic seconds).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Dict, Optional
+
+
+def instance_id(module: str, host: str) -> str:
+    """The name of a module's instance on a host, e.g. ``mfg@cloud``."""
+    return f'{module}@{host}'
+
+
+def host_of(instance: str) -> str:
+    return instance.rpartition('@')[2]
+
+
+@dataclass(frozen=True)
+class Answer:
+    """The grantor's answer to a renewal request (published on the lease topic)."""
+    module: str
+    term: int
+    holder: str                 # the current holder ('' = none)
+    nonce: int                  # the request's nonce (0 for an unsolicited announcement)
+    granted: bool               # True: the requester holds the lease for ``duration`` from its request
+    duration: float
+
+
+class Grantor:
+    """The manager's side for one module."""
+
+    def __init__(self, module: str, duration: float, margin: float, term: int = 0) -> None:
+        if duration <= 0 or margin < 0:
+            raise ValueError('lease duration must be > 0 and margin >= 0')
+        self.module = module
+        self.duration = duration
+        self.margin = margin
+        self.term = term
+        self.holder = ''
+        self.valid_until = float('-inf')     # grantor clock: the last holder may be active until then
+
+    def free_at(self) -> float:
+        """When another instance may be promoted: once every lease granted so far has run out (+ margin)."""
+        return self.valid_until + self.margin
+
+    def may_promote(self, now: float) -> bool:
+        return now >= self.free_at()
+
+    def promote(self, instance: str, now: float) -> int:
+        """Give the module to ``instance`` under a new term; returns the term. Refused (ValueError) while an
+        earlier holder may still be active. The new holder is not active before its first granted renewal."""
+        if not self.may_promote(now):
+            raise ValueError(f'{self.module}: {self.holder or "the last holder"} may be active for '
+                             f'{self.free_at() - now:.3f} s more')
+        self.term += 1
+        self.holder = instance
+        return self.term
+
+    def release(self, instance: str, term: int) -> bool:
+        """The holder confirms it has stopped producing output for good (frozen for a planned migration):
+        the module is free at once. Later renewals of that term are refused."""
+        if instance == self.holder and term == self.term:
+            self.holder = ''
+            self.term += 1
+            self.valid_until = float('-inf')
+            return True
+        return False
+
+    def revoke(self) -> None:
+        """Take the module from its holder (e.g. a promotion rolled back): renewals of its term are refused
+        from now on; a lease already granted runs out by itself (see :meth:`free_at`)."""
+        if self.holder:
+            self.holder = ''
+            self.term += 1
+
+    def request(self, instance: str, term: int, nonce: int, now: float) -> Answer:
+        """A renewal request from ``instance`` for ``term``: granted only to the current holder and term."""
+        granted = bool(self.holder) and instance == self.holder and term == self.term
+        if granted:
+            self.valid_until = max(self.valid_until, now + self.duration)
+        return Answer(self.module, self.term, self.holder, nonce, granted, self.duration)
+
+    def announcement(self) -> Answer:
+        return Answer(self.module, self.term, self.holder, 0, False, self.duration)
+
+
+@dataclass
+class Holder:
+    """An instance's side: is it allowed to produce output now?"""
+    module: str
+    instance: str
+    term: int = 0               # the term it was promoted to (0: standby, never active)
+    valid_until: float = float('-inf')
+    next_nonce: int = 1
+    sent: Dict[int, float] = field(default_factory=dict)    # nonce -> local send time
+    superseded: bool = False    # a newer term or another holder was announced: this instance is done
+    seen: int = 0               # the highest term announced so far (a promotion must be newer)
+
+    def promoted(self, term: int) -> None:
+        """Promotion to ``term``: output waits for the first granted renewal."""
+        if term <= max(self.term, self.seen):
+            raise ValueError(f'{self.instance}: promotion to term {term}, but term {max(self.term, self.seen)} '
+                             f'was already seen')
+        self.term = term
+        self.valid_until = float('-inf')
+        self.sent.clear()
+        self.superseded = False
+
+    def request(self, now: float) -> int:
+        """A renewal request is sent now: returns its nonce (only the last few are remembered)."""
+        nonce = self.next_nonce
+        self.next_nonce += 1
+        self.sent[nonce] = now
+        for old in [n for n in self.sent if n < nonce - 64]:
+            del self.sent[old]
+        return nonce
+
+    def on_answer(self, a: Answer) -> None:
+        if a.module != self.module:
+            return
+        self.seen = max(self.seen, a.term)
+        if self.term == 0:
+            return
+        if a.term > self.term or (a.term == self.term and a.holder != self.instance):
+            self.superseded = True            # someone else's term: never active again
+            self.valid_until = float('-inf')
+            return
+        if a.granted and a.term == self.term and a.holder == self.instance:
+            t0 = self.sent.pop(a.nonce, None)
+            if t0 is not None:
+                self.valid_until = max(self.valid_until, t0 + a.duration)
+
+    def active(self, now: float) -> bool:
+        return self.term > 0 and not self.superseded and now < self.valid_until
+
+
+class TermFilter:
+    """A consumer's side: accept a message from an instance only if it is the current holder of its module
+    according to the newest announcement heard (unmanaged modules, never announced, are accepted)."""
+
+    def __init__(self) -> None:
+        self.current: Dict[str, Answer] = {}
+
+    def on_answer(self, a: Answer) -> None:
+        known = self.current.get(a.module)
+        if known is None or a.term >= known.term:
+            self.current[a.module] = a
+
+    def accept(self, module: str, instance: Optional[str]) -> bool:
+        known = self.current.get(module)
+        if known is None or instance is None:
+            return True
+        return bool(known.holder) and instance == known.holder

@@ -1,0 +1,28 @@
+"""The state a module hands over in a migration: a JSON object, zlib-compressed on the wire.
+
+Each movable node documents the keys of its state in its README ("Migration state"). Floats that are not
+finite (NaN, inf) are kept (Python's JSON writes them as NaN/Infinity and reads them back).
+"""
+from __future__ import annotations
+
+import json
+import zlib
+from typing import Any, Dict
+
+
+class StateError(ValueError):
+    """A state that cannot be decoded or does not belong to the module."""
+
+
+def encode(module: str, state: Dict[str, Any]) -> bytes:
+    return zlib.compress(json.dumps({'module': module, 'state': state}, separators=(',', ':')).encode(), 6)
+
+
+def decode(module: str, data: bytes) -> Dict[str, Any]:
+    try:
+        doc = json.loads(zlib.decompress(bytes(data)).decode())
+    except (zlib.error, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise StateError(f'state of {module}: not a compressed JSON state ({exc})') from None
+    if not isinstance(doc, dict) or doc.get('module') != module or not isinstance(doc.get('state'), dict):
+        raise StateError(f'state of {module}: made by {doc.get("module") if isinstance(doc, dict) else "?"!r}')
+    return doc['state']

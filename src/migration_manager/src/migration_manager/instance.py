@@ -1,0 +1,221 @@
+"""The module side of migrations: what a movable node (mfg, local_mapcell_manager, global_goal_manager,
+move_base) uses to be started as a standby, promoted, frozen and fenced by the migration manager.
+
+A node creates one :class:`ManagedInstance` with its :class:`Hooks`. When the node runs without a migration
+manager (``~migration/role`` empty or absent: every single-master and fixed-placement run) the instance is
+*unmanaged*: always active, no extra topics. Managed, it follows the lease protocol of
+:mod:`migration_manager.core.lease`:
+
+- standby: inputs connected, outputs closed (``active`` is False), no lease;
+- promote(term, state): ``set_state`` (if a state came), then renewal requests every ``renew_period``; active
+  from the first granted renewal (``on_active``) while renewals keep being granted;
+- a lapse (no grant for ``duration``, e.g. cut off): outputs closed until renewals are granted again;
+- superseded (a newer term or another holder announced) or frozen: outputs closed for good (``on_frozen``);
+  a superseded instance shuts its node down (its agent starts a fresh standby if one is wanted here);
+- the active instance publishes its state every ``replicate_period`` on ``/migration/<module>/state``.
+
+Topics and services (``<m>`` the module, ``<h>`` this host): ``/migration/<m>/renew`` (out),
+``/migration/<m>/lease`` (in), ``/migration/<m>/state`` (out, while active), ``/migration/<m>/<h>/status``
+(out, latched), service ``/migration/<m>/<h>/control`` (cnr_msgs/InstanceControl).
+"""
+from __future__ import annotations
+
+import os
+import threading
+import time
+from typing import Any, Dict, Optional
+
+import rospy
+
+from cnr_msgs.msg import InstanceStatus, MigrationLease, MigrationRenew, ModuleState
+from cnr_msgs.srv import InstanceControl, InstanceControlResponse
+from cnr_params.ros import private_section
+from migration_manager.core import state as state_codec
+from migration_manager.core.config import MigrationConfig, from_section
+from migration_manager.core.lease import Answer, Holder, instance_id
+
+INSTANCE_HEADER = 'cnr_instance'       # connection header of a managed instance's output publishers
+
+
+class Hooks:
+    """What the node provides. ``get_state``/``set_state`` are the module's documented state interface."""
+
+    def get_state(self) -> Dict[str, Any]:
+        raise NotImplementedError
+
+    def set_state(self, state: Dict[str, Any]) -> None:
+        raise NotImplementedError
+
+    def on_active(self) -> None:
+        """Outputs open (first activation, or again after a lapse)."""
+
+    def on_frozen(self) -> None:
+        """Outputs closed for good (frozen for a migration, or superseded)."""
+
+
+def topic(module: str, leaf: str) -> str:
+    return f'/migration/{module}/{leaf}'
+
+
+class ManagedInstance:
+    def __init__(self, module: str, hooks: Hooks, namespace: str = '~migration') -> None:
+        self.module = module
+        self.hooks = hooks
+        section = private_section(namespace)
+        self.role_param = section.string('role', '') if 'role' in section else ''
+        self.managed = bool(self.role_param)
+        self.lock = threading.RLock()
+        self.frozen = False
+        self.was_active = False
+        self.message = ''
+        if not self.managed:
+            return
+        if self.role_param != 'standby':
+            raise section.error('role', f'must be standby (or empty: unmanaged), got {self.role_param!r}')
+        self.host = section.string('host')
+        self.cfg: MigrationConfig = from_section(section)
+        if self.host not in self.cfg.hosts:
+            raise section.error('host', f'must be one of {", ".join(self.cfg.hosts)}, got {self.host!r}')
+        self.id = instance_id(module, self.host)
+        self.holder = Holder(module, self.id)
+        self.state_seq = 0
+        self.renew_pub = rospy.Publisher(topic(module, 'renew'), MigrationRenew, queue_size=10)
+        self.state_pub = rospy.Publisher(topic(module, 'state'), ModuleState, queue_size=2)
+        self.status_pub = rospy.Publisher(topic(module, f'{self.host}/status'), InstanceStatus, queue_size=5,
+                                          latch=True)
+        rospy.Subscriber(topic(module, 'lease'), MigrationLease, self._on_lease, queue_size=20)
+        rospy.Service(topic(module, f'{self.host}/control'), InstanceControl, self._on_control)
+        threading.Thread(target=self._loop, name='migration-instance', daemon=True).start()
+
+    # ------------------------------------------------------------------ for the node
+    @property
+    def active(self) -> bool:
+        """May the node produce output now?"""
+        if not self.managed:
+            return True
+        with self.lock:
+            return not self.frozen and self.holder.active(time.monotonic())
+
+    def headers(self) -> Optional[Dict[str, str]]:
+        """Connection headers for the node's output publishers (consumers can tell the instance apart)."""
+        return {INSTANCE_HEADER: self.id} if self.managed else None
+
+    def publisher(self, name: str, data_class, **kwargs) -> rospy.Publisher:
+        return rospy.Publisher(name, data_class, headers=self.headers(), **kwargs)
+
+    # ------------------------------------------------------------------ protocol
+    def _role(self) -> str:
+        if self.frozen:
+            return 'frozen'
+        if self.holder.superseded:
+            return 'superseded'
+        if self.holder.term == 0:
+            return 'standby'
+        return 'active' if self.holder.active(time.monotonic()) else 'promoted'
+
+    def _status(self) -> None:
+        with self.lock:
+            msg = InstanceStatus(module=self.module, instance=self.id, role=self._role(), term=self.holder.term,
+                                 ready=True, pid=os.getpid(), message=self.message)
+        msg.header.stamp = rospy.Time.from_sec(time.time())
+        self.status_pub.publish(msg)
+
+    def _on_lease(self, msg: MigrationLease) -> None:
+        with self.lock:
+            self.holder.on_answer(Answer(msg.module, msg.term, msg.holder, msg.nonce, msg.granted, msg.duration))
+
+    def _state_bytes(self) -> bytes:
+        return state_codec.encode(self.module, self.hooks.get_state())
+
+    def _renew(self) -> None:
+        with self.lock:
+            nonce = self.holder.request(time.monotonic())
+            term = self.holder.term
+        self.renew_pub.publish(MigrationRenew(module=self.module, instance=self.id, term=term, nonce=nonce))
+
+    def _on_control(self, req) -> InstanceControlResponse:
+        try:
+            if req.command == 'state':
+                return InstanceControlResponse(ok=True, message='', term=self.holder.term, state=self._state_bytes())
+            if req.command == 'freeze':
+                with self.lock:
+                    if self.holder.term != req.term:
+                        return InstanceControlResponse(ok=False, term=self.holder.term,
+                                                       message=f'not at term {req.term}')
+                    self.frozen = True
+                    data = self._state_bytes()
+                self.message = f'frozen at term {req.term}'
+                self.hooks.on_frozen()
+                self._status()
+                rospy.loginfo(f'{self.id}: frozen (term {req.term}); state {len(data)} bytes handed over')
+                return InstanceControlResponse(ok=True, message=self.message, term=req.term, state=data)
+            if req.command == 'promote':
+                with self.lock:
+                    if req.state:
+                        self.hooks.set_state(state_codec.decode(self.module, req.state))
+                    self.holder.promoted(req.term)
+                    self.frozen = False
+                self.message = f'promoted to term {req.term}'
+                rospy.loginfo(f'{self.id}: promoted to term {req.term}'
+                              f'{f" with a state of {len(req.state)} bytes" if req.state else ""}')
+                self._renew()
+                self._status()
+                return InstanceControlResponse(ok=True, message=self.message, term=req.term, state=b'')
+            return InstanceControlResponse(ok=False, message=f'unknown command {req.command!r}')
+        except (ValueError, KeyError, TypeError) as exc:      # a state that does not fit, a stale promotion
+            rospy.logwarn(f'{self.id}: {req.command} refused: {exc}')
+            return InstanceControlResponse(ok=False, message=str(exc), term=self.holder.term)
+
+    def _loop(self) -> None:
+        cfg = self.cfg
+        next_renew = next_state = next_status = time.monotonic()
+        last_role = ''
+        while not rospy.core.is_shutdown_requested():
+            now = time.monotonic()
+            with self.lock:
+                promoted = self.holder.term > 0 and not self.frozen and not self.holder.superseded
+                active = promoted and self.holder.active(now)
+                superseded = self.holder.superseded and not self.frozen
+                role = self._role()
+            try:
+                if promoted and now >= next_renew:
+                    next_renew = now + cfg.lease.renew_period
+                    self._renew()
+                if active and not self.was_active:
+                    self.was_active = True
+                    rospy.loginfo(f'{self.id}: active (term {self.holder.term})')
+                    self.hooks.on_active()
+                elif not active and self.was_active:
+                    self.was_active = False
+                    if not self.frozen and not superseded:
+                        rospy.logwarn(f'{self.id}: lease lapsed (term {self.holder.term}): outputs closed until a '
+                                      f'renewal is granted')
+                if superseded:
+                    self.frozen = True
+                    self.message = 'superseded: a newer term was announced'
+                    rospy.logwarn(f'{self.id}: superseded (term {self.holder.term} is over): outputs closed, '
+                                  f'shutting down')
+                    self.hooks.on_frozen()
+                    self._status()
+                    rospy.signal_shutdown('superseded by a newer term')
+                    return
+                if active and now >= next_state:
+                    next_state = now + cfg.replicate_period
+                    self._publish_state()
+                if role != last_role or now >= next_status:
+                    last_role = role
+                    next_status = now + cfg.status_period
+                    self._status()
+            except rospy.ROSException:
+                if rospy.core.is_shutdown_requested():
+                    return
+                raise
+            time.sleep(min(cfg.lease.renew_period, cfg.replicate_period, cfg.status_period) / 4)
+
+    def _publish_state(self) -> None:
+        self.state_seq += 1
+        msg = ModuleState(module=self.module, instance=self.id, term=self.holder.term, seq=self.state_seq,
+                          data=self._state_bytes())
+        msg.header.stamp = rospy.Time.from_sec(time.time())
+        self.state_pub.publish(msg)
+

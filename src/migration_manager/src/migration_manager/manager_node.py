@@ -1,0 +1,301 @@
+"""``migration_manager``: the robot-side authority that places and moves the managed modules (see the package
+README). It grants the leases (the robot keeps working when the cloud is gone), runs each migration
+(:class:`migration_manager.core.plan.Migration`) in its own thread, fails a module over to the robot when the
+cloud's active instance is cut off, and publishes the events and the placement.
+"""
+from __future__ import annotations
+
+import itertools
+import math
+import threading
+import time
+from typing import Dict, List, Optional, Tuple
+
+import rospy
+
+import cnr_params
+from cnr_msgs.msg import InstanceStatus, MigrationEvent, MigrationLease, MigrationRenew, ModuleState, Placement
+from cnr_msgs.srv import AgentCommand, InstanceControl, Migrate, MigrateResponse
+from cnr_params.ros import call_with_timeout, init_node, private_section
+from migration_manager.core.config import from_section
+from migration_manager.core.lease import Answer, Grantor, host_of, instance_id
+from migration_manager.core.plan import Migration, Step
+from migration_manager.instance import topic
+
+
+class ModuleBook:
+    """What the manager knows about one module (guarded by the manager's lock)."""
+
+    def __init__(self, module: str, grantor: Grantor) -> None:
+        self.module = module
+        self.grantor = grantor
+        self.migration: Optional[Migration] = None
+        self.replicated: Optional[bytes] = None       # newest state of the current holder
+        self.status: Dict[str, InstanceStatus] = {}    # host -> newest status
+        self.first_grant: Dict[int, float] = {}        # term -> monotonic time of its first granted renewal
+
+    def host(self) -> str:
+        return host_of(self.grantor.holder) if self.grantor.holder else ''
+
+
+class Manager:
+    def __init__(self) -> None:
+        p = private_section('~')
+        self.cfg = cfg = from_section(p.section('migration'))
+        placement = p.raw('placement')
+        if not isinstance(placement, dict):
+            raise p.error('placement', f'must map modules to hosts, got {placement!r}')
+        self.initial: Dict[str, str] = {}
+        for module in cfg.modules:
+            host = str(placement.get(module, cfg.authority))
+            if host not in cfg.hosts:
+                raise p.error('placement', f'{module}: host must be one of {", ".join(cfg.hosts)}, got {host!r}')
+            self.initial[module] = host
+        self.lock = threading.RLock()
+        self.ids = itertools.count(1)
+        self.books: Dict[str, ModuleBook] = {m: ModuleBook(m, cfg.lease.grantor(m)) for m in cfg.modules}
+        self.lease_pubs = {m: rospy.Publisher(topic(m, 'lease'), MigrationLease, queue_size=50) for m in cfg.modules}
+        self.event_pub = rospy.Publisher('~events', MigrationEvent, queue_size=100)
+        self.placement_pub = rospy.Publisher('~placement', Placement, queue_size=5, latch=True)
+        self.control = {(m, h): rospy.ServiceProxy(topic(m, f'{h}/control'), InstanceControl)
+                        for m in cfg.modules for h in cfg.hosts}
+        self.agents = {h: rospy.ServiceProxy(f'/migration/agents/{h}/command', AgentCommand) for h in cfg.hosts}
+        for m in cfg.modules:
+            rospy.Subscriber(topic(m, 'renew'), MigrationRenew, self._on_renew, queue_size=50)
+            rospy.Subscriber(topic(m, 'state'), ModuleState, self._on_state, queue_size=2)
+            for h in cfg.hosts:
+                rospy.Subscriber(topic(m, f'{h}/status'), InstanceStatus, self._on_status, queue_size=10)
+        rospy.Service('~migrate', Migrate, self._on_migrate)
+
+    # ------------------------------------------------------------------ lease protocol
+    def _answer(self, a: Answer) -> None:
+        self.lease_pubs[a.module].publish(MigrationLease(module=a.module, term=a.term, holder=a.holder,
+                                                         nonce=a.nonce, granted=a.granted, duration=a.duration))
+
+    def _on_renew(self, msg: MigrationRenew) -> None:
+        book = self.books.get(msg.module)
+        if book is None:
+            return
+        now = time.monotonic()
+        with self.lock:
+            a = book.grantor.request(msg.instance, msg.term, msg.nonce, now)
+            if a.granted and msg.term not in book.first_grant:
+                book.first_grant[msg.term] = now
+        self._answer(a)
+
+    def _on_state(self, msg: ModuleState) -> None:
+        book = self.books.get(msg.module)
+        if book is None:
+            return
+        with self.lock:
+            if msg.instance == book.grantor.holder and msg.term == book.grantor.term:
+                book.replicated = bytes(msg.data)
+                if book.migration is not None:
+                    book.migration.replicated = book.replicated
+
+    def _on_status(self, msg: InstanceStatus) -> None:
+        book = self.books.get(msg.module)
+        if book is not None:
+            with self.lock:
+                book.status[host_of(msg.instance)] = msg
+
+    # ------------------------------------------------------------------ calls with timeouts
+    def _call(self, proxy, *args) -> Tuple[bool, object]:
+        return call_with_timeout(proxy, self.cfg.control_call, *args)
+
+    def _instance_up(self, module: str, host: str) -> bool:
+        ok, res = self._call(self.control[(module, host)], 'state', 0, b'')
+        return ok and res.ok
+
+    # ------------------------------------------------------------------ migrations
+    def _event(self, mid: int, m: Migration, message: str) -> None:
+        ev = MigrationEvent(id=mid, module=m.module, source=m.source, target=m.target, mode=m.mode,
+                            step=m.step.value, message=message, term=m.term,
+                            downtime=m.downtime if m.step is Step.DONE and m.downtime is not None else math.nan)
+        ev.header.stamp = rospy.Time.from_sec(time.time())
+        try:
+            self.event_pub.publish(ev)
+        except rospy.ROSException:
+            if not rospy.core.is_shutdown_requested():
+                raise
+        rospy.loginfo(f'migration {mid} {m.module} {m.source or "-"}->{m.target} ({m.mode}): {message}')
+
+    def run_migration(self, module: str, target: str, mode: str, failover: bool = False) -> Tuple[int, Migration]:
+        """Carry out one migration to its end (blocking); returns its number and its final state."""
+        book = self.books[module]
+        mid = next(self.ids)
+        now = time.monotonic()
+        with self.lock:
+            if book.migration is not None:
+                raise ValueError(f'{module} is already migrating ({book.migration.source}->{book.migration.target})')
+            m = Migration(module, book.host(), target, mode, self.cfg.timeouts, book.grantor, now,
+                          failover=failover)
+            m.replicated = book.replicated
+            book.migration = m
+        self._publish_placement()
+        seen = 0
+        try:
+            ready = self._instance_up(module, target) and self._standby(book, target)
+            with self.lock:
+                actions = m.begin(time.monotonic(), ready)
+            while True:
+                for verb, host, detail in actions:
+                    self._do(m, verb, host, detail)
+                with self.lock:
+                    for ev in m.events[seen:]:
+                        self._event(mid, m, ev.message)
+                    seen = len(m.events)
+                    if m.finished:
+                        break
+                    actions = self._poll(book, m)
+                if not actions:
+                    time.sleep(0.01)
+        finally:
+            with self.lock:
+                book.migration = None
+            self._publish_placement()
+        return mid, m
+
+    def _standby(self, book: ModuleBook, host: str) -> bool:
+        st = book.status.get(host)
+        return st is not None and st.role == 'standby'
+
+    def _poll(self, book: ModuleBook, m: Migration) -> List:
+        """Events from the world, then deadlines (caller holds the lock)."""
+        now = time.monotonic()
+        if m.step is Step.STARTING and getattr(m, '_probe_at', 0.0) <= now:
+            m._probe_at = now + 0.2
+            self.lock.release()
+            try:
+                up = self._instance_up(m.module, m.target)
+            finally:
+                self.lock.acquire()
+            if up:
+                return m.target_ready(time.monotonic())
+        if m.step is Step.PROMOTING and m.term in book.first_grant:
+            return m.target_active(book.first_grant[m.term], m.term)
+        st = book.status.get(m.target)
+        if m.step in (Step.PROMOTING,) and st is not None and st.role == 'superseded' and st.term == m.term:
+            return m.target_failed(now, 'the target was superseded')
+        return m.tick(now)
+
+    def _do(self, m: Migration, verb: str, host: str, detail) -> None:
+        """One action of a migration (no lock held: calls may take up to control_call)."""
+        if verb == 'start_standby':
+            ok, res = self._call(self.agents[host], 'start', m.module)
+            if not ok or not res.ok:
+                with self.lock:
+                    m.target_failed(time.monotonic(), f'agent on {host}: {res if not ok else res.message}')
+        elif verb == 'freeze':
+            ok, res = self._call(self.control[(m.module, host)], 'freeze', detail, b'')
+            with self.lock:
+                if ok and res.ok:
+                    m.frozen(time.monotonic(), bytes(res.state))
+                else:
+                    m.source_unreachable(time.monotonic())
+        elif verb == 'promote':
+            term, state = detail
+            ok, res = self._call(self.control[(m.module, host)], 'promote', term, state or b'')
+            if not ok or not res.ok:
+                with self.lock:
+                    m.target_failed(time.monotonic(), f'promotion refused: {res if not ok else res.message}')
+        elif verb == 'retire':
+            if detail == 'cold' or m.module not in self.cfg.hot_standby:
+                self._call(self.agents[host], 'stop', m.module)
+            else:                     # hot: the old instance makes way for a fresh standby there
+                self._call(self.agents[host], 'stop', m.module)
+                self._call(self.agents[host], 'start', m.module)
+        elif verb == 'stop':
+            self._call(self.agents[host], 'stop', m.module)
+
+    def _on_migrate(self, req) -> MigrateResponse:
+        started = time.monotonic()
+        if req.module not in self.books:
+            return MigrateResponse(ok=False, outcome='refused', downtime=math.nan,
+                                   message=f'{req.module!r} is not managed ({", ".join(self.books)})')
+        if req.target not in self.cfg.hosts:
+            return MigrateResponse(ok=False, outcome='refused', downtime=math.nan,
+                                   message=f'target must be one of {", ".join(self.cfg.hosts)}')
+        mode = req.mode or ('hot' if req.module in self.cfg.hot_standby else 'cold')
+        try:
+            mid, m = self.run_migration(req.module, req.target, mode)
+        except ValueError as exc:
+            return MigrateResponse(ok=False, outcome='refused', message=str(exc), downtime=math.nan)
+        outcome = m.step.value
+        return MigrateResponse(ok=m.step is Step.DONE, outcome=outcome, id=mid, term=m.term,
+                               message=m.events[-1].message if m.events else '',
+                               downtime=m.downtime if m.downtime is not None else math.nan,
+                               duration=time.monotonic() - started)
+
+    # ------------------------------------------------------------------ placement, failover, start-up
+    def _publish_placement(self) -> None:
+        msg = Placement()
+        with self.lock:
+            for module, book in self.books.items():
+                msg.modules.append(module)
+                msg.hosts.append(book.host())
+                msg.terms.append(book.grantor.term)
+                msg.migrating.append(book.migration is not None)
+        msg.header.stamp = rospy.Time.from_sec(time.time())
+        try:
+            self.placement_pub.publish(msg)
+        except rospy.ROSException:
+            if not rospy.core.is_shutdown_requested():
+                raise
+
+    def start_modules(self) -> None:
+        """The initial placement; a module the cloud cannot take (link down) starts on the robot."""
+        def start(module: str, host: str) -> None:
+            _, m = self.run_migration(module, host, 'cold')
+            if m.step is not Step.DONE and host != self.cfg.authority:
+                rospy.logwarn(f'{module}: cannot start on {host} ({m.error}): starting it on {self.cfg.authority}')
+                self.run_migration(module, self.cfg.authority, 'cold')
+            for other in self.cfg.hosts:
+                if module in self.cfg.hot_standby and other != self.books[module].host():
+                    self._call(self.agents[other], 'start', module)
+        threads = [threading.Thread(target=start, args=item, daemon=True) for item in self.initial.items()]
+        for t in threads:
+            t.start()
+
+    def spin(self) -> None:
+        next_announce = time.monotonic()
+        while not rospy.core.is_shutdown_requested():
+            now = time.monotonic()
+            for book in self.books.values():
+                with self.lock:
+                    holder_host = book.host()
+                    lapsed = (book.migration is None and holder_host and holder_host != self.cfg.authority
+                              and book.grantor.term in book.first_grant and now > book.grantor.valid_until)
+                if lapsed and self.cfg.failover:
+                    rospy.logwarn(f'{book.module}: the active instance on {holder_host} lost its lease (cut off?): '
+                                  f'failing over to {self.cfg.authority}')
+                    mode = 'hot' if book.module in self.cfg.hot_standby else 'cold'
+                    threading.Thread(target=self._failover, args=(book.module, mode), daemon=True).start()
+            if now >= next_announce:
+                next_announce = now + self.cfg.status_period
+                for book in self.books.values():
+                    with self.lock:
+                        a = book.grantor.announcement()
+                    try:
+                        self._answer(a)
+                    except rospy.ROSException:
+                        if rospy.core.is_shutdown_requested():
+                            return
+                        raise
+                self._publish_placement()
+            time.sleep(0.02)
+
+    def _failover(self, module: str, mode: str) -> None:
+        try:
+            self.run_migration(module, self.cfg.authority, mode, failover=True)
+        except ValueError:
+            pass                      # a migration started meanwhile
+
+
+@cnr_params.exit_on_config_error
+def main() -> None:
+    init_node('migration_manager')
+    manager = Manager()
+    if private_section('~').boolean('start_modules'):
+        manager.start_modules()
+    manager.spin()

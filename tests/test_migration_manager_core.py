@@ -1,0 +1,255 @@
+"""migration_manager's rospy-free core: leases and terms (never two active), the migration state machine
+(make-before-break, rollback, failover), the state codec and the configuration."""
+import math
+import os
+
+import pytest
+
+from cnr_params import ConfigError, Section, load_yaml
+from migration_manager.core import state as codec
+from migration_manager.core.config import from_section
+from migration_manager.core.lease import Answer, Grantor, Holder, TermFilter, instance_id
+from migration_manager.core.plan import Migration, Step, Timeouts
+
+D, MARGIN = 0.6, 0.15
+TIMEOUTS = Timeouts(start=30.0, freeze=1.0, promote=3.0)
+
+
+def grant(g: Grantor, h: Holder, t_request: float, t_grant: float, t_receive: float) -> None:
+    nonce = h.request(t_request)
+    h.on_answer(g.request(h.instance, h.term, nonce, t_grant))
+
+
+# ---------------------------------------------------------------------------- leases
+def test_a_promoted_instance_is_active_only_after_its_first_granted_renewal():
+    g, h = Grantor('mfg', D, MARGIN), Holder('mfg', 'mfg@cloud')
+    term = g.promote('mfg@cloud', 0.0)
+    h.promoted(term)
+    assert not h.active(0.01)
+    grant(g, h, 0.01, 0.05, 0.09)
+    assert h.active(0.1) and h.active(0.6) and not h.active(0.61)      # from its request, not the answer
+
+
+def test_the_holder_lease_always_ends_before_the_grantor_may_promote_another():
+    g, h = Grantor('mfg', D, MARGIN), Holder('mfg', 'mfg@cloud')
+    h.promoted(g.promote('mfg@cloud', 0.0))
+    grant(g, h, 1.0, 1.3, 1.6)                      # slow link: 300 ms each way
+    holder_end = 1.0 + D
+    assert not h.active(holder_end)
+    assert not g.may_promote(1.3 + D + MARGIN - 1e-6) and g.may_promote(1.3 + D + MARGIN)
+    assert holder_end < g.free_at()
+    with pytest.raises(ValueError):
+        g.promote('mfg@robot', 1.5)
+
+
+def test_a_late_answer_cannot_extend_a_lease():
+    g, h = Grantor('mfg', D, MARGIN), Holder('mfg', 'mfg@cloud')
+    h.promoted(g.promote('mfg@cloud', 0.0))
+    nonce = h.request(1.0)
+    answer = g.request('mfg@cloud', h.term, nonce, 1.05)
+    h.on_answer(answer)                             # delivered 10 s late (queued in an outage)
+    assert not h.active(11.0)
+    h.on_answer(answer)                             # and again: the nonce is spent
+    assert not h.active(1.1) or h.valid_until == 1.0 + D
+
+
+def test_release_frees_at_once_and_refuses_the_old_term():
+    g, h = Grantor('mfg', D, MARGIN), Holder('mfg', 'mfg@robot')
+    h.promoted(g.promote('mfg@robot', 0.0))
+    grant(g, h, 0.1, 0.1, 0.1)
+    assert g.release('mfg@robot', h.term) and g.may_promote(0.11)
+    a = g.request('mfg@robot', h.term, h.request(0.12), 0.12)
+    assert not a.granted
+    h.on_answer(a)
+    assert h.superseded and not h.active(0.13)
+    assert not g.release('mfg@robot', 1)            # only the current holder and term
+
+
+def test_revoke_refuses_renewals_but_waits_for_a_granted_lease_to_run_out():
+    g, h = Grantor('mfg', D, MARGIN), Holder('mfg', 'mfg@cloud')
+    h.promoted(g.promote('mfg@cloud', 0.0))
+    grant(g, h, 1.0, 1.0, 1.0)
+    g.revoke()
+    assert not g.request('mfg@cloud', h.term, h.request(1.1), 1.1).granted
+    assert not g.may_promote(1.0 + D) and g.may_promote(1.0 + D + MARGIN)
+
+
+def test_a_superseded_holder_is_never_active_again_until_promoted_anew():
+    h = Holder('mfg', 'mfg@cloud')
+    h.promoted(1)
+    h.on_answer(Answer('mfg', 2, 'mfg@robot', 0, False, D))
+    assert h.superseded
+    h.on_answer(Answer('mfg', 1, 'mfg@cloud', h.request(0.0), True, D))     # an old grant arrives late
+    assert not h.active(0.1)
+    with pytest.raises(ValueError):
+        h.promoted(2)                               # terms only grow
+    h.promoted(3)
+    assert not h.superseded
+
+
+def test_never_two_active_under_random_delays_losses_and_failovers():
+    """A cloud holder renews over a link with random delays, losses and outages; the grantor fails over to the
+    robot whenever the cloud's lease lapses and back when asked: at no sampled instant are both active."""
+    import random
+    rng = random.Random(7)
+    g = Grantor('mfg', D, MARGIN)
+    holders = {h: Holder('mfg', instance_id('mfg', h)) for h in ('robot', 'cloud')}
+    holders['cloud'].promoted(g.promote('mfg@cloud', 0.0))
+    in_flight = []                                  # (deliver_at, kind, payload)
+    t, dt = 0.0, 0.01
+    both = 0
+    while t < 120.0:
+        outage = (int(t) // 10) % 3 == 2            # 10 s out of every 30 s
+        for name, h in holders.items():
+            if h.term and not h.superseded and round(t / 0.1) == t / 0.1 or (h.term and rng.random() < 0.1):
+                nonce = h.request(t)
+                delay = 0.0 if name == 'robot' else rng.uniform(0.005, 0.4)
+                if name == 'robot' or (not outage and rng.random() > 0.05):
+                    in_flight.append((t + delay, 'req', (name, h.term, nonce, delay)))
+        for item in sorted([x for x in in_flight if x[0] <= t]):
+            in_flight.remove(item)
+            _, kind, payload = item
+            if kind == 'req':
+                name, term, nonce, delay = payload
+                a = g.request(instance_id('mfg', name), term, nonce, t)
+                if name == 'robot' or not outage:
+                    in_flight.append((t + delay, 'ans', (name, a)))
+            else:
+                name, a = payload
+                holders[name].on_answer(a)
+        # failover to the robot when the cloud lapsed; back to the cloud when the link is good
+        holder = g.holder.rpartition('@')[2]
+        if holder == 'cloud' and t > g.valid_until and g.valid_until > 0:
+            g.revoke()
+        if not g.holder and g.may_promote(t):
+            target = 'cloud' if not outage and holder != 'cloud' and rng.random() < 0.5 else 'robot'
+            holders[target].promoted(g.promote(instance_id('mfg', target), t))
+        if all(h.active(t) for h in holders.values()):
+            both += 1
+        t = round(t + dt, 6)
+    assert both == 0
+
+
+def test_term_filter_accepts_only_the_current_holder():
+    f = TermFilter()
+    assert f.accept('move_base', 'move_base@cloud')           # never announced: unmanaged
+    f.on_answer(Answer('move_base', 3, 'move_base@cloud', 0, False, D))
+    assert f.accept('move_base', 'move_base@cloud') and not f.accept('move_base', 'move_base@robot')
+    f.on_answer(Answer('move_base', 2, 'move_base@robot', 0, False, D))     # older: ignored
+    assert f.accept('move_base', 'move_base@cloud')
+    f.on_answer(Answer('move_base', 4, '', 0, False, D))     # between holders: nobody
+    assert not f.accept('move_base', 'move_base@cloud')
+
+
+# ---------------------------------------------------------------------------- migrations
+def started(module='mfg', host='robot'):
+    g = Grantor(module, D, MARGIN)
+    g.promote(instance_id(module, host), 0.0)
+    g.request(instance_id(module, host), g.term, 1, 0.0)
+    return g
+
+
+def test_cold_migration_is_make_before_break():
+    g = started()
+    m = Migration('mfg', 'robot', 'cloud', 'cold', TIMEOUTS, g, 1.0)
+    assert m.begin(1.0, target_standby_ready=False) == [('start_standby', 'cloud', None)]
+    assert m.step is Step.STARTING and g.holder == 'mfg@robot'          # the source keeps working meanwhile
+    assert m.target_ready(3.0) == [('freeze', 'robot', 1)]
+    actions = m.frozen(3.01, b'state')
+    assert actions == [('promote', 'cloud', (3, b'state'))] and g.holder == 'mfg@cloud'
+    assert m.target_active(3.2, 3) == [('retire', 'robot', 'cold')]
+    assert m.step is Step.DONE and math.isclose(m.downtime, 0.19)
+
+
+def test_hot_migration_with_a_ready_standby_freezes_at_once():
+    g = started()
+    m = Migration('mfg', 'robot', 'cloud', 'hot', TIMEOUTS, g, 1.0)
+    assert m.begin(1.0, target_standby_ready=True) == [('freeze', 'robot', 1)]
+
+
+def test_a_target_that_does_not_start_is_rolled_back_and_the_source_never_stopped():
+    g = started()
+    m = Migration('mfg', 'robot', 'cloud', 'cold', TIMEOUTS, g, 0.0)
+    m.begin(0.0, False)
+    assert m.tick(29.0) == []
+    assert m.tick(30.1) == [('stop', 'cloud', None)]
+    assert m.step is Step.ROLLED_BACK and g.holder == 'mfg@robot' and g.term == 1
+
+
+def test_a_target_that_crashes_after_the_freeze_gives_the_module_back_to_the_source():
+    g = started()
+    m = Migration('mfg', 'robot', 'cloud', 'cold', TIMEOUTS, g, 0.0)
+    m.begin(0.0, True)
+    m.frozen(0.1, b's')
+    term = m.term
+    g.request('mfg@cloud', term, 5, 0.2)          # it was granted once, then crashed
+    actions = m.target_failed(0.3, 'crashed')
+    assert actions == [('stop', 'cloud', None)] and m.step is Step.ROLLING_BACK
+    assert m.tick(0.2 + D) == []                  # its lease may still run
+    actions = m.tick(0.2 + D + MARGIN)
+    assert actions == [('promote', 'robot', (term + 2, b's'))] and m.step is Step.ROLLED_BACK
+    assert g.holder == 'mfg@robot'
+
+
+def test_an_unreachable_source_is_replaced_only_after_its_lease_ran_out():
+    g = Grantor('mfg', D, MARGIN)
+    g.promote('mfg@cloud', 0.0)
+    g.request('mfg@cloud', 1, 1, 10.0)            # last renewal granted at 10.0: valid until 10.6
+    m = Migration('mfg', 'cloud', 'robot', 'hot', TIMEOUTS, g, 10.1)
+    m.replicated = b'replicated'
+    assert m.begin(10.1, True) == [('freeze', 'cloud', 1)]
+    assert m.tick(11.0) == []                     # freeze deadline 11.1 not reached
+    assert m.tick(11.2) == [('promote', 'robot', (3, b'replicated'))]   # lease 10.6 + 0.15 already over
+    assert m.state_source == 'replicated' and math.isclose(m.frozen_at, 10.75)
+
+
+def test_failover_skips_the_freeze_and_waits_for_the_lease():
+    g = Grantor('mfg', D, MARGIN)
+    g.promote('mfg@cloud', 0.0)
+    g.request('mfg@cloud', 1, 1, 10.0)
+    m = Migration('mfg', 'cloud', 'robot', 'hot', TIMEOUTS, g, 10.61, failover=True)
+    assert m.begin(10.61, True) == []
+    assert m.step is Step.WAITING_LEASE
+    assert m.tick(10.7) == []
+    assert m.tick(10.75)[0][0] == 'promote'
+
+
+def test_first_start_has_no_source():
+    g = Grantor('mfg', D, MARGIN)
+    m = Migration('mfg', '', 'robot', 'cold', TIMEOUTS, g, 0.0)
+    m.begin(0.0, False)
+    assert m.target_ready(2.0) == [('promote', 'robot', (1, None))]
+    assert m.target_active(2.1, 1) == [] and m.step is Step.DONE
+
+
+def test_a_migration_to_where_the_module_is_is_refused():
+    with pytest.raises(ValueError):
+        Migration('mfg', 'robot', 'robot', 'cold', TIMEOUTS, started(), 0.0)
+    with pytest.raises(ValueError):
+        Migration('mfg', 'robot', 'cloud', 'warm', TIMEOUTS, started(), 0.0)
+
+
+# ---------------------------------------------------------------------------- codec and config
+def test_state_round_trip_and_foreign_state():
+    data = codec.encode('mfg', {'cell': 3, 'mean': math.nan, 'checked': [1, 2]})
+    back = codec.decode('mfg', data)
+    assert back['cell'] == 3 and math.isnan(back['mean']) and back['checked'] == [1, 2]
+    with pytest.raises(codec.StateError, match='made by'):
+        codec.decode('move_base', data)
+    with pytest.raises(codec.StateError):
+        codec.decode('mfg', b'garbage')
+
+
+def test_config_from_the_workspace_and_errors_name_the_field(workspace):
+    data = load_yaml(os.path.join(workspace, 'config', 'migration.yaml'))
+    cfg = from_section(Section(data, 'config/migration.yaml'))
+    assert cfg.other('robot') == 'cloud' and 'mfg' in cfg.modules and cfg.lease.renew_period < cfg.lease.duration
+    bad = dict(data, lease=dict(data['lease'], renew_period=0.5))
+    with pytest.raises(ConfigError, match='lease.renew_period'):
+        from_section(Section(bad, 'config/migration.yaml'))
+    bad = dict(data, hot_standby=['kestrel_driver'])
+    with pytest.raises(ConfigError, match='hot_standby'):
+        from_section(Section(bad, 'config/migration.yaml'))
+    del data['timeouts']
+    with pytest.raises(ConfigError, match='timeouts'):
+        from_section(Section(data, 'config/migration.yaml'))
