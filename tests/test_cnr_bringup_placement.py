@@ -43,7 +43,7 @@ def test_allow_lists_follow_the_placement(catalog):
         assert t in mb.allow('topics')
     assert '/merged_measurements' not in mb.allow('topics')
     aware = catalog.placement('paper_network_aware')
-    assert aware.allow('services') == sorted(['/global_goal_manager/*'] + catalog.always['services'])
+    assert aware.allow('services') == sorted(['/global_goal_manager/*', *catalog.always['services']])
     assert '/cell_states' in aware.allow('topics') and '/mapcell_measurements' not in aware.allow('topics')
     normal = catalog.placement('paper_normal')
     assert '/mapcell_measurements' in normal.allow('topics') and '/move_base/*' in normal.allow('topics')
