@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Dict, List, Optional, Sequence
+from typing import Any, Callable, Dict, List, Optional, Sequence
 
 from cnr_params import ConfigError, Section
 
@@ -32,6 +32,13 @@ class GoalPolicy:
 
     def next_cell(self, cells: Sequence[CellView], robot_cell: Optional[int], robot_xy) -> Optional[int]:
         raise NotImplementedError
+
+    def state(self) -> Dict[str, Any]:
+        """What the policy remembers beyond the cells' visit times (handed over in a migration)."""
+        return {}
+
+    def restore(self, state: Dict[str, Any]) -> None:
+        """Take over :meth:`state` of another instance."""
 
 
 class LeastRecentlyVisited(GoalPolicy):
@@ -59,6 +66,15 @@ class CoverageSweep(GoalPolicy):
 
     def __init__(self) -> None:
         self._i = -1
+
+    def state(self) -> Dict[str, Any]:
+        return {'waypoint_index': self._i}       # where the sweep is: the next goal continues it
+
+    def restore(self, state: Dict[str, Any]) -> None:
+        i = state.get('waypoint_index')
+        if not isinstance(i, int) or isinstance(i, bool):
+            raise ValueError(f'coverage_sweep state: waypoint_index must be an integer, got {i!r}')
+        self._i = i
 
     @staticmethod
     def waypoints(rows: int, cols: int) -> List[int]:

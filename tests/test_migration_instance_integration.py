@@ -1,0 +1,90 @@
+"""A managed module instance on one real master, driven through the real lease protocol by the test
+(tests/migration_driver.py): passive as a standby, active only after its first granted renewal, its state
+handed over on promotion and returned on freeze, silent once cut off. global_goal_manager here; the other
+modules' instances have tests of their own."""
+import math
+import os
+
+import pytest
+
+from cnr_harness import wait_until
+
+rospy = pytest.importorskip('rospy')
+
+
+def cell_states():
+    from cnr_msgs.msg import CellState, CellStates
+    msg = CellStates(rows=2, cols=4, cell_size=1.0)
+    for i in range(8):
+        r, c = divmod(i, 4)
+        msg.cells.append(CellState(index=i, row=r, col=c, min_x=c, max_x=c + 1.0, min_y=r, max_y=r + 1.0,
+                                   center_x=c + 0.5, center_y=r + 0.5, last_visit=rospy.Time(0)))
+    return msg
+
+
+@pytest.fixture
+def gg(ros, workspace):
+    from cnr_msgs.msg import CellStates
+    from migration_driver import LeaseDriver, managed_params
+    ros.master.call('setParam', '/global_goal_manager', {
+        'frame_id': 'map', 'global_goal_manager': {'policy': 'coverage_sweep'},
+        'migration': managed_params(workspace, 'robot')})
+    pub = rospy.Publisher('/cell_states', CellStates, queue_size=1, latch=True)
+    pub.publish(cell_states())
+    driver = LeaseDriver('global_goal_manager', 'robot')
+    proc = ros.master.run(['rosrun', 'global_goal_manager', 'global_goal_manager'], 'gg_managed')
+    yield proc, driver
+    ros.master.stop_child(proc)
+    driver.close()
+    pub.unregister()
+    ros.master.call('deleteParam', '/global_goal_manager')
+
+
+def next_goal(timeout=1.0):
+    from cnr_msgs.srv import NextGoal
+    rospy.wait_for_service('/global_goal_manager/next_goal', timeout)
+    return rospy.ServiceProxy('/global_goal_manager/next_goal', NextGoal)(0.5, 0.5)
+
+
+def served():
+    try:
+        rospy.wait_for_service('/global_goal_manager/next_goal', 0.2)
+        return True
+    except rospy.ROSException:
+        return False
+
+
+def test_standby_promotion_state_freeze_and_cut_off(gg):
+    proc, driver = gg
+    driver.wait_standby(30)
+    assert not served()                                    # a standby serves nothing
+    driver.promote({'policy': 'coverage_sweep', 'policy_state': {'waypoint_index': 2}, 'last_goal': 7})
+    driver.wait_active(10)
+    wait_until(served, 10, 'the promoted instance to serve')
+    res = next_goal()
+    # coverage sweep over 2x4 cells: waypoints 0, 3, 7, 4; handed over at index 2 -> the next is index 3
+    assert res.success and res.cell.index == 4, res
+    assert driver.state()['policy_state'] == {'waypoint_index': 3}
+
+    state = driver.freeze()                                # frozen: outputs closed for good
+    assert state['last_goal'] == 4 and state['policy_state'] == {'waypoint_index': 3}
+    wait_until(lambda: not served(), 10, 'the frozen instance to stop serving')
+    assert proc.alive()
+
+
+def test_a_cut_off_instance_closes_its_outputs_and_a_bad_state_is_refused(gg):
+    from cnr_msgs.srv import InstanceControl
+    from migration_manager.core import state as codec
+    proc, driver = gg
+    driver.wait_standby(30)
+    control = rospy.ServiceProxy('/migration/global_goal_manager/robot/control', InstanceControl)
+    bad = control('promote', 1, codec.encode('global_goal_manager', {'policy': 'least_recently_visited'}))
+    assert not bad.ok and 'policy' in bad.message
+    driver.promote()
+    driver.wait_active(10)
+    assert next_goal().success
+    driver.cut_off()                                       # renewals unanswered: the lease runs out
+    driver.wait_role('promoted', 5)
+    res = next_goal()
+    assert not res.success and 'not the active instance' in res.message
+    assert proc.alive() and 'Traceback' not in proc.output()
