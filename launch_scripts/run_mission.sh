@@ -5,6 +5,7 @@
 #                                 [--report-dir DIR]
 #   launch_scripts/run_mission.sh --two-host [--placement NAME|FILE] [--scenario ...] [--port P] [--report-dir DIR]
 #                                 [--delay MS] [--rate MBIT] [--loss PCT] [--trace FILE] [--link-map FILE]
+#                                 [--migration [--rule]]
 #
 # Sets up the workspace, starts a master (default port 11311, or --port, or ROS_MASTER_URI), brings up the
 # simulated TurtleBot with the monitoring modules (kestrel_driver, merger, local_mapcell_manager,
@@ -20,14 +21,19 @@
 # computer inside its CPU cgroup (config/testbed.yaml robot_cpu). The link: --delay (one-way, ms, each
 # direction), --rate (Mbit/s), --loss (%), or --trace FILE (testbed.sh trace) or --link-map FILE (conditions
 # by robot position, testbed.sh follow, e.g. config/link_map_corridor.yaml). Two-host runs are real-time
-# (the emulator's delays are wall-clock time). The report adds the placement, link.tsv (conditions and
+# (the emulator's delays are wall-clock time). --migration: the modules of config/migration.yaml are started
+# by migration agents where the placement says and can be moved while the mission runs
+# (launch_scripts/migrate.sh; src/migration_manager/README.md); --rule also moves them by the link quality
+# (config/migration.yaml rule). The report adds the placement, link.tsv (conditions and
 # bytes over time) and the bytes over the link.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
-port=""; scenario="corridor"; rtf="5"; report=""; two_host=""; placement="move_base_cloud"; link_args=(); rtf_given=""
+port=""; scenario="corridor"; rtf="5"; report=""; two_host=""; placement="move_base_cloud"; link_args=(); rtf_given=""; migration=()
 while [ $# -gt 0 ]; do
   case "$1" in
     --two-host) two_host=1; shift ;;
+    --migration) migration+=(--migration); two_host=1; shift ;;
+    --rule) migration+=(--rule); two_host=1; shift ;;
     --placement) placement="${2:?}"; two_host=1; shift 2 ;;
     --delay|--rate|--loss) link_args+=("$1" "${2:?}"); shift 2 ;;
     --trace|--link-map) link_args+=("$1" "$(realpath -m "${2:?}")"); shift 2 ;;
@@ -60,7 +66,7 @@ if [ -n "$two_host" ]; then
   cnr_log "scenario $name ($scenario_file) on two hosts, placement $placement, report in $report"
   set +e
   rosrun cnr_mission two_host_mission --config-dir "$CNR_WS/config" --scenario "$scenario_file" --map "$map" \
-    --start "$x" "$y" "$a" --placement "$placement" --report-dir "$report" --port "${port:-11311}" "${link_args[@]}"
+    --start "$x" "$y" "$a" --placement "$placement" --report-dir "$report" --port "${port:-11311}" "${link_args[@]}" "${migration[@]}"
   status=$?
   set -e
 else

@@ -105,3 +105,18 @@ def test_cli_show_and_error():
     assert out.returncode == 0 and 'cloud  move_base' in out.stdout
     bad = subprocess.run(['rosrun', 'cnr_bringup', 'placement', 'show', 'nope'], capture_output=True, text=True)
     assert bad.returncode == 2 and len(bad.stderr.strip().splitlines()) == 1 and 'Traceback' not in bad.stderr
+
+
+def test_managed_modules_cross_from_either_host_and_are_started_by_the_agents(catalog):
+    p = catalog.placement('paper_network_aware').managed_by(['mfg', 'global_goal_manager', 'move_base'])
+    topics = p.allow('topics')
+    for t in ('/move_base/*', '/scan', '/mobile_base/commands/velocity', '/cell_states', '/mfg/*', '/hotspot'):
+        assert t in topics, t                        # either side may hold them at run time
+    assert '/global_goal_manager/*' in p.allow('services')
+    args = launch_args(p, 'cloud') + launch_args(p, 'robot')
+    assert 'mfg:=true' not in args and 'global_goal_manager:=true' not in args and 'move_base:=true' not in args
+    assert 'merger:=true' in launch_args(p, 'robot')
+    lmm = catalog.placement('monitoring_cloud')
+    assert lmm.relayed() and not lmm.managed_by(['local_mapcell_manager']).relayed()
+    with pytest.raises(ValueError, match='not movable'):
+        p.managed_by(['kestrel_driver'])

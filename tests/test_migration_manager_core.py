@@ -253,3 +253,50 @@ def test_config_from_the_workspace_and_errors_name_the_field(workspace):
     del data['timeouts']
     with pytest.raises(ConfigError, match='timeouts'):
         from_section(Section(data, 'config/migration.yaml'))
+
+
+# ---------------------------------------------------------------------------- the configured rule
+def rule(workspace):
+    from migration_manager.core.rule import PlacementRule, rule_from_section
+    data = load_yaml(os.path.join(workspace, 'config', 'migration.yaml'))
+    s = Section(data, 'config/migration.yaml')
+    cfg = from_section(s)
+    return PlacementRule(rule_from_section(s.section('rule'), cfg.modules, cfg.hosts, cfg.authority))
+
+
+def test_rule_offloads_on_a_good_link_after_the_dwell_and_onloads_when_it_is_bad(workspace):
+    r = rule(workspace)
+    c = r.cfg
+    on_robot = {m: 'robot' for m in c.modules}
+    r.observe(0.0, True, c.good_rtt / 2, 0.0)
+    assert r.orders(c.dwell - 0.1, on_robot) == []                       # not for long enough yet
+    assert r.orders(c.dwell + 0.1, on_robot) == [(m, 'cloud') for m in c.modules]
+    for m in c.modules:
+        r.moved(m, c.dwell + 0.1)
+    on_cloud = {m: 'cloud' for m in c.modules}
+    r.observe(10.0, True, (c.good_rtt + c.bad_rtt) / 2, 0.0)           # in the band: stay
+    assert r.orders(10.0 + c.dwell + 1, on_cloud) == []
+    r.observe(20.0, False, math.nan, 1.0)                                # peer lost
+    assert r.orders(20.0 + c.dwell + 0.1, on_cloud) == [(m, 'robot') for m in c.modules]   # budget ignored
+
+
+def test_rule_budget_limits_moves_to_the_cloud(workspace):
+    r = rule(workspace)
+    c = r.cfg
+    m = c.modules[0]
+    r.moved(m, 0.0)
+    r.observe(0.0, True, c.good_rtt / 2, 0.0)
+    assert c.dwell + 0.1 < c.min_interval
+    assert r.orders(c.dwell + 0.1, {m: 'robot'}) == []                  # moved too recently
+    assert r.orders(c.min_interval + 0.1, {m: 'robot'}) == [(m, 'cloud')]
+    assert r.orders(c.min_interval + 0.1, {m: ''}) == []                # migrating: no order
+
+
+def test_rule_config_errors_name_the_field(workspace):
+    from migration_manager.core.rule import rule_from_section
+    data = load_yaml(os.path.join(workspace, 'config', 'migration.yaml'))
+    data['rule']['bad']['rtt_above'] = 0.01
+    s = Section(data, 'config/migration.yaml')
+    cfg = from_section(s)
+    with pytest.raises(ConfigError, match='rule.bad.rtt_above'):
+        rule_from_section(s.section('rule'), cfg.modules, cfg.hosts, cfg.authority)

@@ -54,6 +54,16 @@ class Placement:
     name: str
     hosts: Dict[str, str]
     catalog: 'Catalog' = field(repr=False)
+    managed: Tuple[str, ...] = ()       # modules the migration manager may move at run time (see managed_by)
+
+    def managed_by(self, modules) -> 'Placement':
+        """This placement as the *start* of a run in which ``modules`` may migrate: they count as present on
+        every host for the bridges, no store-and-forward relay serves them (the stream's consumer may move),
+        and the launch files do not start them (the migration agents do)."""
+        unknown = [m for m in modules if m not in self.catalog.movable]
+        if unknown:
+            raise ValueError(f"not movable: {', '.join(unknown)} (movable: {', '.join(self.catalog.movable)})")
+        return Placement(self.name, dict(self.hosts), self.catalog, tuple(modules))
 
     def host(self, module: str) -> str:
         try:
@@ -72,7 +82,8 @@ class Placement:
     def relayed(self) -> List[Stream]:
         """The store-and-forward streams this placement needs (producer on the robot, consumer elsewhere)."""
         robot = self.catalog.hosts[0]
-        return [s for s in self.catalog.streams if self.hosts[s.producer] == robot and self.hosts[s.consumer] != robot]
+        return [s for s in self.catalog.streams if self.hosts[s.producer] == robot and self.hosts[s.consumer] != robot
+                and s.producer not in self.managed and s.consumer not in self.managed]
 
     def allow(self, kind: str) -> List[str]:
         """Names of ``kind`` (topics/services) that cross the link: used on more than one host."""
@@ -81,7 +92,8 @@ class Placement:
         used: Dict[str, set] = {}
         for module in self.catalog.modules.values():
             for name in module.names(kind):
-                used.setdefault(name, set()).add(self.hosts[module.name])
+                where = self.catalog.hosts if module.name in self.managed else (self.hosts[module.name],)
+                used.setdefault(name, set()).update(where)
         names = [n for n, hosts in used.items() if len(hosts) > 1]
         names += [n for n in self.catalog.always[kind] if n not in names]
         if kind == 'topics':
@@ -176,8 +188,10 @@ def load_catalog(path: str) -> Catalog:
 
 
 def launch_args(placement: Placement, host: str) -> List[str]:
-    """``module:=true|false`` for each movable module (the launch files' arguments for ``host``)."""
-    return [f'{m}:={str(placement.hosts[m] == host).lower()}' for m in placement.catalog.movable]
+    """``module:=true|false`` for each movable module (the launch files' arguments for ``host``); managed
+    modules are started by the migration agents, not by the launch."""
+    return [f'{m}:={str(placement.hosts[m] == host and m not in placement.managed).lower()}'
+            for m in placement.catalog.movable]
 
 
 def describe(placement: Placement) -> str:
@@ -185,8 +199,10 @@ def describe(placement: Placement) -> str:
     cat = placement.catalog
     lines = [f'placement {placement.name}:']
     for host in cat.hosts:
-        mods = [m for m in cat.modules if placement.hosts[m] == host]
+        mods = [m + ('*' if m in placement.managed else '') for m in cat.modules if placement.hosts[m] == host]
         lines.append(f"  {host:6s} {', '.join(mods) if mods else '-'}")
+    if placement.managed:
+        lines.append(f"  (* starts there; migration_manager may move it)")
     for kind in KINDS:
         lines.append(f"  bridged {kind}: {', '.join(placement.allow(kind)) or '-'}")
     relayed = placement.relayed()

@@ -11,7 +11,7 @@ import os
 import sys
 import threading
 import time
-from typing import List, Optional, Tuple
+from typing import Dict, List, Optional, Tuple
 
 import rospy
 from nav_msgs.msg import Odometry
@@ -23,8 +23,8 @@ from cnr_maps.mapio import load_map
 from cnr_maps.measurements import Measurement, write_tsv
 from cnr_mission.core.report import CellSummary, path_length, render_png, write_summary
 from cnr_mission.core.scenario import read_mission
-from cnr_msgs.msg import (BatteryEnergy, CellStates, Hotspot, MergedMeasurement, MfgActivity, NetworkProfile, SearchState,
-                          StoreForwardStatus)
+from cnr_msgs.msg import (BatteryEnergy, CellStates, Hotspot, MergedMeasurement, MfgActivity, MigrationEvent,
+                          NetworkProfile, Placement, SearchState, StoreForwardStatus)
 from cnr_msgs.srv import GetMeasurements
 from cnr_params import ConfigError
 from cnr_params.ros import init_node, private_section
@@ -74,6 +74,12 @@ class MissionMonitor:
         rospy.Subscriber('mfg/activity', MfgActivity, self._on_activity, queue_size=1)
         if profile_topic:
             rospy.Subscriber(profile_topic, NetworkProfile, self._on_profile, queue_size=10)
+        # migration_manager (two-host runs with --migration): each migration's steps and the placement over time
+        self.migrations: List[Dict] = []
+        self.placements: List[Tuple[float, str, str, int]] = []
+        self.current_placement: Dict[str, Tuple[str, int]] = {}
+        rospy.Subscriber('/migration_manager/events', MigrationEvent, self._on_migration, queue_size=100)
+        rospy.Subscriber('/migration_manager/placement', Placement, self._on_placement, queue_size=10)
 
     def _say(self, text: str) -> None:
         t = rospy.Time.now().to_sec() - (self.start_sim or rospy.Time.now().to_sec())
@@ -103,6 +109,29 @@ class MissionMonitor:
             with self.lock:
                 self.profiles.append((msg.header.stamp.to_sec() - self.start_sim, float(msg.alive), msg.rtt,
                                       msg.rtt_spread, msg.loss, msg.c_bw, msg.a_bw, msg.r_bw))
+
+    def _sim_since_start(self) -> float:
+        now = rospy.Time.now().to_sec()
+        return now - (self.start_sim if self.start_sim is not None else now)
+
+    def _on_migration(self, msg: MigrationEvent) -> None:
+        if msg.step not in ('done', 'rolled_back', 'failed'):
+            return
+        entry = dict(id=msg.id, time=self._sim_since_start(), module=msg.module, source=msg.source or None,
+                     target=msg.target, mode=msg.mode, outcome=msg.step, term=msg.term,
+                     downtime=None if math.isnan(msg.downtime) else msg.downtime, message=msg.message)
+        with self.lock:
+            self.migrations.append(entry)
+        self._say(f'migration {msg.id}: {msg.module} {msg.source or "-"} -> {msg.target} ({msg.mode}): {msg.step}'
+                  + (f', hand-over {1000 * msg.downtime:.0f} ms' if entry['downtime'] is not None else ''))
+
+    def _on_placement(self, msg: Placement) -> None:
+        t = self._sim_since_start()
+        with self.lock:
+            for module, host, term in zip(msg.modules, msg.hosts, msg.terms):
+                if self.current_placement.get(module) != (host, term):
+                    self.current_placement[module] = (host, term)
+                    self.placements.append((t, module, host, term))
 
     def _on_energy(self, msg: BatteryEnergy) -> None:
         if self.energy_first is None:
@@ -175,6 +204,13 @@ class MissionMonitor:
                 f.write('time\talive\trtt\trtt_spread\tloss\tc_bw\ta_bw\tr_bw\n')
                 for row in profiles:
                     f.write('\t'.join(f'{v:.6g}' for v in row) + '\n')
+        with self.lock:
+            migrations, placements = list(self.migrations), list(self.placements)
+        if placements:   # where each managed module was active over the mission ('' = none: migrating)
+            with open(os.path.join(self.report_dir, 'placement.tsv'), 'w') as f:
+                f.write('time\tmodule\thost\tterm\n')
+                for t, module, host, term in placements:
+                    f.write(f'{t:.3f}\t{module}\t{host or "-"}\t{term}\n')
         cells = []
         if self.cells:
             cells = [CellSummary(c.index, c.row, c.col, c.min_x, c.max_x, c.min_y, c.max_y, c.mean_temperature,
@@ -216,7 +252,9 @@ class MissionMonitor:
                 # the MFG's reports stop reaching the robot when it is cut off (it runs on the cloud): the time
                 # since the last one is time the MFG could not act on the robot
                 unreachable_at_end=now - self.activity_received),
-            heat_sources=[dict(name=n, x=x, y=y) for n, x, y in self.sources])
+            heat_sources=[dict(name=n, x=x, y=y) for n, x, y in self.sources],
+            migrations=migrations or None,
+            placement_over_time=None if not placements else dict(file='placement.tsv', changes=len(placements)))
         if cells:
             occ = extent = None
             try:

@@ -14,6 +14,12 @@ What runs where:
 * **cloud namespace**: the cloud's rosmaster, bridge, network_monitor and the modules placed on the cloud (with
   a map_server of its own when move_base runs there).
 
+With ``--migration`` the modules of config/migration.yaml are managed: a migration agent on each host starts
+them, the migration manager (robot, inside the cap) places them where the placement says at the start and moves
+them when asked (``migrate.sh``, or the configured rule); both hosts' bridges then carry every name a managed
+module may use from either side, and each host's local_mapcell_manager keeps its own store
+(``store_<host>.tsv``).
+
 The bridges' allow-lists follow from the placement (``cnr_bringup.placement``). Time: the emulator works in
 wall-clock time and two-host runs are real-time runs (real-time factor 1): a delay or rate set on the link is
 then the one the nodes see in sim time, and the robot's CPU cap means what it says. The achieved factor
@@ -63,9 +69,15 @@ class TwoHostMission:
 
     def __init__(self, ws_config: str, scenario_file: str, map_file: str, start: List[str], placement: Placement,
                  report_dir: str, port: int, link: Dict[str, float], trace: Optional[str],
-                 link_map: Optional[str]) -> None:
+                 link_map: Optional[str], migration: bool = False, rule: bool = False) -> None:
         self.config = ws_config
         self.scenario_file, self.map_file, self.start = scenario_file, map_file, start
+        self.migration = migration or rule
+        self.rule = rule
+        if self.migration:
+            from migration_manager.core.config import from_section
+            self.migration_cfg = from_section(Section.from_file(os.path.join(ws_config, 'migration.yaml')))
+            placement = placement.managed_by(self.migration_cfg.modules)
         self.placement = placement
         self.report_dir = report_dir
         self.log_dir = os.path.join(report_dir, 'logs')
@@ -161,8 +173,7 @@ class TwoHostMission:
             side.call('setParam', '/run_id', str(uuid.uuid1()))
         secret = self._secret()
         x, y, a = self.start
-        common = [f'scenario_file:={self.scenario_file}', f'map:={self.map_file}',
-                  f'store:={os.path.join(self.report_dir, "store.tsv")}']
+        common = [f'scenario_file:={self.scenario_file}', f'map:={self.map_file}']
         self._launch(self.robot, 'world', ['cnr_mission', 'world.launch', f'scenario_file:={self.scenario_file}',
                                            f'map:={self.map_file}', f'x:={x}', f'y:={y}', f'a:={a}',
                                            'real_time_factor:=1', f'report_dir:={self.report_dir}',
@@ -174,7 +185,9 @@ class TwoHostMission:
                                            f'relay_drain_timeout:={self.relay_drain_timeout}'],
                      until='mission_monitor')
         for side, peer in ((self.robot, self.cloud), (self.cloud, self.robot)):
+            store = f'store_{side.side}.tsv' if self.migration else 'store.tsv'
             host_args = ['cnr_mission', 'host.launch', f'host:={side.side}', *common,
+                         f'store:={os.path.join(self.report_dir, store)}',
                          f'bridge_config:={self._bridge_config(side, peer, secret)}', f'secret_file:={secret}',
                          f'network_monitor_overlay:={self._monitor_overlay(side, peer)}',
                          *launch_args(self.placement, side.side)]
@@ -184,9 +197,13 @@ class TwoHostMission:
             for st in relayed:
                 host_args += [f'relay_stream:={st.stream}', f'relay_topic:={st.topic}',
                               f'relay_dir:={os.path.join(self.report_dir, "store_forward_" + side.side)}']
+            if self.migration:
+                start = {m: self.placement.host(m) for m in self.placement.managed}
+                host_args += ['migration:=true', 'migration_placement:=' + json.dumps(start),
+                              f'migration_rule:={str(self.rule).lower()}']
             if side.side == 'robot':
                 host_args.append('kestrel_driver:=true')
-            elif self.placement.host('move_base') == 'cloud':
+            elif self.placement.host('move_base') == 'cloud' or 'move_base' in self.placement.managed:
                 host_args.append('map_server:=true')
             self._launch(side, f'host_{side.side}', host_args,
                          prefix=self._robot_cpu() if side.side == 'robot' else None)
@@ -305,6 +322,10 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
     ap.add_argument('--loss', type=float, help='loss per direction [%%]')
     ap.add_argument('--trace', help='link trace (TSV, testbed.sh trace) played from the start')
     ap.add_argument('--link-map', help='link-quality map by robot position (testbed.sh follow)')
+    ap.add_argument('--migration', action='store_true', help='the modules of config/migration.yaml are managed by '
+                    'migration_manager (start where --placement says, move at run time)')
+    ap.add_argument('--rule', action='store_true', help='--migration, and migration_rule moves modules by the link '
+                    'quality (config/migration.yaml rule)')
     return ap.parse_args(argv)
 
 
@@ -325,13 +346,13 @@ def main(argv: Optional[List[str]] = None) -> int:
         print('two_host_mission: the two-host mission needs root (network namespaces, TUN devices, cgroups)',
               file=sys.stderr)
         return EXIT_CONFIG
-    print(describe(placement), flush=True)
     try:
         mission = TwoHostMission(args.config_dir, args.scenario, args.map, args.start, placement, args.report_dir,
-                                 args.port, link, args.trace, args.link_map)
+                                 args.port, link, args.trace, args.link_map, args.migration, args.rule)
     except ConfigError as exc:
         print(f'two_host_mission: {exc}', file=sys.stderr)
         return EXIT_CONFIG
+    print(describe(mission.placement), flush=True)
     signal.signal(signal.SIGINT, _on_signal)
     signal.signal(signal.SIGTERM, _on_signal)
     status = 1
@@ -354,9 +375,11 @@ def main(argv: Optional[List[str]] = None) -> int:
             signal.signal(signal.SIGTERM, signal.SIG_DFL)
     if status in (0, EXIT_NOT_FOUND):
         amend_summary(args.report_dir, dict(
-            two_host=dict(placement=placement.name, hosts=placement.as_dict(),
-                          bridged_topics=placement.allow('topics'), bridged_services=placement.allow('services'),
-                          relayed=[s.topic for s in placement.relayed()],
+            two_host=dict(placement=placement.name, hosts=placement.as_dict(), migration=mission.migration, rule=args.rule,
+                          managed=list(mission.placement.managed),
+                          bridged_topics=mission.placement.allow('topics'),
+                          bridged_services=mission.placement.allow('services'),
+                          relayed=[s.topic for s in mission.placement.relayed()],
                           link_set=dict(link, trace=args.trace, link_map=args.link_map),
                           wall_time_total=time.monotonic() - wall0, robot_cpu=mission.cpu,
                           **mission.link_report())))
