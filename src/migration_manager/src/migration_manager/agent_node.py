@@ -21,6 +21,7 @@ import cnr_params
 from cnr_harness.process import Proc, stop_process
 from cnr_msgs.msg import AgentHealth
 from cnr_msgs.srv import AgentCommand, AgentCommandResponse
+from cnr_params.config import EXIT_CONFIG
 from cnr_params.ros import init_node, private_section
 from migration_manager.core.config import from_section
 
@@ -33,6 +34,7 @@ class Slot:
     started: int = 0
     exited_at: Optional[float] = None
     last_code: Optional[int] = None
+    last_pid: int = 0
 
 
 class Agent:
@@ -65,6 +67,7 @@ class Agent:
         slot.started += 1
         log = os.path.join(self.log_dir, f'{slot.module}-{slot.started}.log')
         slot.proc = Proc(self._argv(slot.module), log)
+        slot.last_pid = slot.proc.pid
         slot.exited_at = None
         rospy.loginfo(f'{slot.module}: started a standby (pid {slot.proc.pid}, log {log})')
 
@@ -113,7 +116,7 @@ class Agent:
             for s in self.slots.values():
                 alive = s.proc is not None and s.proc.alive()
                 msg.modules.append(s.module)
-                msg.pids.append(s.proc.pid if alive else 0)
+                msg.pids.append(s.last_pid)
                 msg.restarts.append(max(0, s.started - 1))
                 msg.states.append('running' if alive else 'restarting' if s.wanted else
                                   f'exited ({s.last_code})' if s.last_code is not None else 'stopped')
@@ -128,16 +131,24 @@ class Agent:
         next_health = time.monotonic()
         while not rospy.core.is_shutdown_requested():
             now = time.monotonic()
+            changed = False
             with self.lock:
                 for s in self.slots.values():
                     if s.proc is not None and s.proc.poll() is not None and s.exited_at is None:
                         s.exited_at, s.last_code = now, s.proc.returncode
-                        (rospy.logwarn if s.wanted else rospy.loginfo)(
-                            f'{s.module}: exited with status {s.last_code}'
-                            f'{"; a standby is started again" if s.wanted else ""}')
+                        if s.last_code == EXIT_CONFIG and s.wanted:      # would only fail again: no restart loop
+                            s.wanted = False
+                            rospy.logerr(f'{s.module}: exited with status {EXIT_CONFIG} (bad configuration, see '
+                                         f'{s.proc.log_path}): not started again')
+                        else:
+                            (rospy.logwarn if s.wanted else rospy.loginfo)(
+                                f'{s.module}: exited with status {s.last_code}'
+                                f'{"; a standby is started again" if s.wanted else ""}')
+                        changed = True
                     if s.wanted and s.exited_at is not None and now - s.exited_at >= self.cfg.restart_delay:
                         self._start(s)
-            if now >= next_health:
+                        changed = True
+            if changed or now >= next_health:
                 next_health = now + self.cfg.status_period
                 self._health()
             time.sleep(0.05)

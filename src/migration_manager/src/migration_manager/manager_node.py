@@ -9,18 +9,27 @@ import itertools
 import math
 import threading
 import time
+from dataclasses import dataclass
 from typing import Dict, List, Optional, Tuple
 
 import rospy
 
 import cnr_params
-from cnr_msgs.msg import InstanceStatus, MigrationEvent, MigrationLease, MigrationRenew, ModuleState, Placement
+from cnr_msgs.msg import AgentHealth, InstanceStatus, MigrationEvent, MigrationLease, MigrationRenew, ModuleState, Placement
 from cnr_msgs.srv import AgentCommand, InstanceControl, Migrate, MigrateResponse
 from cnr_params.ros import call_with_timeout, init_node, private_section
 from migration_manager.core.config import from_section
-from migration_manager.core.lease import Answer, Grantor, host_of, instance_id
+from migration_manager.core.lease import Answer, Grantor, host_of
 from migration_manager.core.plan import Migration, Step
 from migration_manager.instance import topic
+
+
+@dataclass
+class Run:
+    """A migration being carried out and what the manager tracks beside it."""
+    migration: Migration
+    agent_pid: int = 0               # the target standby's process (cold), from the agent
+    probe_at: float = 0.0            # next probe of the target's control service (STARTING)
 
 
 class ModuleBook:
@@ -65,6 +74,9 @@ class Manager:
             rospy.Subscriber(topic(m, 'state'), ModuleState, self._on_state, queue_size=2)
             for h in cfg.hosts:
                 rospy.Subscriber(topic(m, f'{h}/status'), InstanceStatus, self._on_status, queue_size=10)
+        self.health: Dict[str, Dict[str, Tuple[str, int]]] = {}       # host -> module -> (state, pid)
+        for h in cfg.hosts:
+            rospy.Subscriber(f'/migration/agents/{h}/health', AgentHealth, self._on_health, queue_size=5)
         rospy.Service('~migrate', Migrate, self._on_migrate)
 
     # ------------------------------------------------------------------ lease protocol
@@ -98,6 +110,10 @@ class Manager:
         if book is not None:
             with self.lock:
                 book.status[host_of(msg.instance)] = msg
+
+    def _on_health(self, msg: AgentHealth) -> None:
+        with self.lock:
+            self.health[msg.host] = {m: (st, pid) for m, st, pid in zip(msg.modules, msg.states, msg.pids)}
 
     # ------------------------------------------------------------------ calls with timeouts
     def _call(self, proxy, *args) -> Tuple[bool, object]:
@@ -134,20 +150,21 @@ class Manager:
             book.migration = m
         self._publish_placement()
         seen = 0
+        run = Run(m)
         try:
             ready = self._instance_up(module, target) and self._standby(book, target)
             with self.lock:
                 actions = m.begin(time.monotonic(), ready)
             while True:
                 for verb, host, detail in actions:
-                    self._do(m, verb, host, detail)
+                    self._do(run, verb, host, detail)
                 with self.lock:
                     for ev in m.events[seen:]:
                         self._event(mid, m, ev.message)
                     seen = len(m.events)
                     if m.finished:
                         break
-                    actions = self._poll(book, m)
+                    actions = self._poll(book, run)
                 if not actions:
                     time.sleep(0.01)
         finally:
@@ -160,11 +177,12 @@ class Manager:
         st = book.status.get(host)
         return st is not None and st.role == 'standby'
 
-    def _poll(self, book: ModuleBook, m: Migration) -> List:
+    def _poll(self, book: ModuleBook, run: Run) -> List:
         """Events from the world, then deadlines (caller holds the lock)."""
+        m = run.migration
         now = time.monotonic()
-        if m.step is Step.STARTING and getattr(m, '_probe_at', 0.0) <= now:
-            m._probe_at = now + 0.2
+        if m.step is Step.STARTING and run.probe_at <= now:
+            run.probe_at = now + 0.2
             self.lock.release()
             try:
                 up = self._instance_up(m.module, m.target)
@@ -172,6 +190,10 @@ class Manager:
                 self.lock.acquire()
             if up:
                 return m.target_ready(time.monotonic())
+        if m.step is Step.STARTING:
+            state, pid = self.health.get(m.target, {}).get(m.module, ('', 0))
+            if state.startswith('exited') and pid and pid == run.agent_pid:
+                return m.target_failed(now, f'the standby on {m.target} {state} at start')
         if m.step is Step.PROMOTING and m.term in book.first_grant:
             return m.target_active(book.first_grant[m.term], m.term)
         st = book.status.get(m.target)
@@ -179,10 +201,13 @@ class Manager:
             return m.target_failed(now, 'the target was superseded')
         return m.tick(now)
 
-    def _do(self, m: Migration, verb: str, host: str, detail) -> None:
+    def _do(self, run: Run, verb: str, host: str, detail) -> None:
         """One action of a migration (no lock held: calls may take up to control_call)."""
+        m = run.migration
         if verb == 'start_standby':
             ok, res = self._call(self.agents[host], 'start', m.module)
+            if ok and res.ok:
+                run.agent_pid = res.pid
             if not ok or not res.ok:
                 with self.lock:
                     m.target_failed(time.monotonic(), f'agent on {host}: {res if not ok else res.message}')
