@@ -1,0 +1,63 @@
+"""``migration_probe``: the consumer's view of a module across migrations (tests and bench_migration.sh).
+
+Records every message of the given topics with its arrival time (wall clock, this host) and the instance that
+published it (the ``cnr_instance`` connection header; '-' for an unmanaged publisher), and optionally calls
+``/global_goal_manager/next_goal`` at a fixed rate (the global goal manager has no periodic output of its own),
+recording each answer. Writes a TSV (``time``, ``topic``, ``instance``, ``ok``) as it goes, flushed per line, so
+a reader sees the gaps: downtime = the gap between the last output of the old instance and the first of the new
+one, measured here, on the consumer's side.
+"""
+from __future__ import annotations
+
+import threading
+import time
+
+import rospy
+
+import cnr_params
+from cnr_msgs.srv import NextGoal
+from cnr_params.ros import call_with_timeout, init_node, private_section
+from migration_manager.instance import INSTANCE_HEADER
+
+
+class Probe:
+    def __init__(self) -> None:
+        p = private_section('~')
+        topics = p.raw('topics')
+        if not isinstance(topics, list) or not all(isinstance(t, str) and t for t in topics):
+            raise p.error('topics', f'must be a list of topic names, got {topics!r}')
+        self.rate = p.number('next_goal_rate', nonnegative=True)
+        self.lock = threading.Lock()
+        self.out = open(p.string('out'), 'a', buffering=1)
+        if self.out.tell() == 0:
+            self.out.write('time\ttopic\tinstance\tok\n')
+        for t in topics:
+            rospy.Subscriber(t, rospy.AnyMsg, self._on_msg, callback_args=t, queue_size=200)
+        self.next_goal = rospy.ServiceProxy('/global_goal_manager/next_goal', NextGoal)
+        self.last_instance = ''
+
+    def _write(self, topic: str, instance: str, ok: bool) -> None:
+        with self.lock:
+            self.out.write(f'{time.time():.6f}\t{topic}\t{instance}\t{int(ok)}\n')
+
+    def _on_msg(self, msg: rospy.AnyMsg, topic: str) -> None:
+        self._write(topic, msg._connection_header.get(INSTANCE_HEADER, '-'), True)
+
+    def spin(self) -> None:
+        if self.rate <= 0:
+            rospy.spin()
+            return
+        period = 1.0 / self.rate
+        next_call = time.monotonic()
+        while not rospy.core.is_shutdown_requested():
+            done, res = call_with_timeout(self.next_goal, 1.0, 0.0, 0.0)
+            ok = done and res.success
+            self._write('next_goal', '', ok)
+            next_call = max(next_call + period, time.monotonic())
+            time.sleep(max(0.0, next_call - time.monotonic()))
+
+
+@cnr_params.exit_on_config_error
+def main() -> None:
+    init_node('migration_probe')
+    Probe().spin()
