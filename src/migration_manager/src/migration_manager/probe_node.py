@@ -3,7 +3,8 @@
 Records every message of the given topics with its arrival time (wall clock, this host) and the instance that
 published it (the ``cnr_instance`` connection header; '-' for an unmanaged publisher), and optionally calls
 ``/global_goal_manager/next_goal`` at a fixed rate (the global goal manager has no periodic output of its own),
-recording each answer. Writes a TSV (``time``, ``topic``, ``instance``, ``ok``) as it goes, flushed per line, so
+recording each answer, and move_base's goal results (``/move_base/result``: ok = succeeded, the final status
+code in the instance column). Writes a TSV (``time``, ``topic``, ``instance``, ``ok``) as it goes, flushed per line, so
 a reader sees the gaps: downtime = the gap between the last output of the old instance and the first of the new
 one, measured here, on the consumer's side.
 """
@@ -13,6 +14,8 @@ import threading
 import time
 
 import rospy
+from actionlib_msgs.msg import GoalStatus
+from move_base_msgs.msg import MoveBaseActionResult
 
 import cnr_params
 from cnr_msgs.srv import NextGoal
@@ -33,6 +36,8 @@ class Probe:
             self.out.write('time\ttopic\tinstance\tok\n')
         for t in topics:
             rospy.Subscriber(t, rospy.AnyMsg, self._on_msg, callback_args=t, queue_size=200)
+        # move_base's results: ok = SUCCEEDED, the instance column holds the final status
+        rospy.Subscriber('/move_base/result', MoveBaseActionResult, self._on_result, queue_size=20)
         self.next_goal = rospy.ServiceProxy('/global_goal_manager/next_goal', NextGoal)
         self.last_instance = ''
 
@@ -42,6 +47,9 @@ class Probe:
 
     def _on_msg(self, msg: rospy.AnyMsg, topic: str) -> None:
         self._write(topic, msg._connection_header.get(INSTANCE_HEADER, '-'), True)
+
+    def _on_result(self, msg: MoveBaseActionResult) -> None:
+        self._write('/move_base/result', str(msg.status.status), msg.status.status == GoalStatus.SUCCEEDED)
 
     def spin(self) -> None:
         if self.rate <= 0:
