@@ -1,0 +1,108 @@
+"""Analysis for bench_migration (ROS-free): the consumer-side downtime of a migration from a
+migration_probe TSV, and the table of the results.
+
+Downtime (the issue's definition): from the last output of the old instance to the first output of the new
+one, measured where the output is consumed. For a module whose output carries its instance (the
+``cnr_instance`` connection header: local_mapcell_manager's mapcell_measurements, mfg's activity, move_base's
+cmd_vel) that is exact; for the global goal manager, whose only output is its service's answers, it is the
+longest gap between successful answers around the migration (the probe asks 20 times a second).
+"""
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from typing import Dict, Iterable, List, Optional, Sequence, Tuple
+
+import numpy as np
+
+# which output tells, on the consumer's side, that a module is working
+OUTPUT_TOPIC = {
+    'local_mapcell_manager': '/mapcell_measurements',
+    'mfg': '/mfg/activity',
+    'move_base': '/mobile_base/commands/velocity',
+    'global_goal_manager': 'next_goal',
+}
+
+
+@dataclass(frozen=True)
+class ProbeRow:
+    time: float
+    topic: str
+    instance: str
+    ok: bool
+
+
+def read_probe(path: str) -> List[ProbeRow]:
+    with open(path, newline='') as f:
+        return [ProbeRow(float(r['time']), r['topic'], r['instance'], r['ok'] == '1')
+                for r in csv.DictReader(f, delimiter='\t') if r.get('time')]
+
+
+def handover_gap(rows: Sequence[ProbeRow], module: str, source: str, target: str, t0: float,
+                 t1: float) -> Optional[float]:
+    """The consumer's downtime of one migration ordered at ``t0`` and answered at ``t1`` (wall s).
+
+    None if it cannot be told (no output from the new instance within 10 s after ``t1``, or, for instance-tagged
+    outputs, none from the old one before the switch)."""
+    topic = OUTPUT_TOPIC[module]
+    window = [r for r in rows if r.topic == topic and t0 - 5.0 <= r.time <= t1 + 10.0]
+    if topic == 'next_goal':
+        times = [r.time for r in window if r.ok]
+        if not times or times[-1] < t1:
+            return None
+        return float(max((b - a for a, b in zip(times, times[1:])), default=math.nan))
+    old, new = f'{module}@{source}', f'{module}@{target}'
+    first_new = next((r.time for r in window if r.instance == new and r.time >= t0), None)
+    if first_new is None:
+        return None
+    last_old = max((r.time for r in window if r.instance == old and r.time <= first_new), default=None)
+    return None if last_old is None else first_new - last_old
+
+
+def stray_outputs(rows: Sequence[ProbeRow], module: str, source: str, target: str, t0: float, t1: float) -> int:
+    """Outputs of the old instance received after the new one's first output (within 10 s after ``t1``): more
+    than 0 means both were producing at once (never expected; messages already in flight excepted)."""
+    topic = OUTPUT_TOPIC[module]
+    if topic == 'next_goal':
+        return 0
+    window = [r for r in rows if r.topic == topic and t0 - 5.0 <= r.time <= t1 + 10.0]
+    first_new = next((r.time for r in window if r.instance == f'{module}@{target}' and r.time >= t0), None)
+    if first_new is None:
+        return 0
+    return sum(1 for r in window if r.instance == f'{module}@{source}' and r.time > first_new)
+
+
+def percentile(values: Iterable[float], q: float) -> float:
+    v = [x for x in values if x is not None and math.isfinite(x)]
+    return float(np.percentile(v, q)) if v else math.nan
+
+
+@dataclass
+class Group:
+    key: Tuple
+    gaps: List[float]
+    manager: List[float]
+    outcomes: Dict[str, int]
+
+    def row(self) -> List[str]:
+        def ms(x: float) -> str:
+            return '–' if not math.isfinite(x) else f'{1000 * x:.0f}'
+        n_ok = self.outcomes.get('done', 0)
+        return [*map(str, self.key), f'{n_ok}/{sum(self.outcomes.values())}',
+                ms(percentile(self.gaps, 50)), ms(percentile(self.gaps, 95)), ms(max(self.gaps, default=math.nan)),
+                ms(percentile(self.manager, 50)), ms(percentile(self.manager, 95))]
+
+
+def group_results(results: Sequence[Dict[str, str]], keys: Sequence[str]) -> List[Group]:
+    groups: Dict[Tuple, Group] = {}
+    for r in results:
+        key = tuple(r[k] for k in keys)
+        g = groups.setdefault(key, Group(key, [], [], {}))
+        g.outcomes[r['outcome']] = g.outcomes.get(r['outcome'], 0) + 1
+        if r['outcome'] == 'done':
+            for value, into in ((r['consumer_gap'], g.gaps), (r['manager_downtime'], g.manager)):
+                if value not in ('', 'nan', 'None'):
+                    into.append(float(value))
+    return [groups[k] for k in sorted(groups, key=lambda k: tuple(float(x) if x.replace('.', '').isdigit() else x
+                                                                   for x in k))]

@@ -1,0 +1,265 @@
+"""Migration downtime on the testbed (launch_scripts/bench_migration.sh; root).
+
+    /usr/bin/python3 -m cnr_benchmarks.migration_bench [--runs 10] [--rtts 0,50,100] [--modules ...]
+        [--modes cold,hot] [--cutoff-trials 3] [--out bench_results/migration] [--port 11411]
+
+Runs the two-host mission with ``--migration`` (every module of config/migration.yaml starts on the robot;
+corridor scenario with a long timeout so the robot keeps patrolling), a migration_probe on the robot (the
+consumer's view: every output and its instance, 20 global-goal requests a second, move_base's results), and,
+for each RTT (set as two one-way halves) x module x mode, ``--runs`` round trips robot -> cloud -> robot through
+``migrate``. Hot migrations first start a standby on the target and wait until it is warm. Then, per module,
+``--cutoff-trials`` times: the module on the cloud, the link cut, the time until the robot's instance is
+promoted and its output is back. At the end: measurements lost (merger's output vs the store) and goals
+aborted (move_base results). Writes results.tsv, failover.tsv (rows appended as measured), migration.md.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import re
+import subprocess
+import sys
+import time
+from typing import Dict, List, Optional
+
+import yaml
+
+from cnr_benchmarks import report
+from cnr_benchmarks.core.migration import OUTPUT_TOPIC, group_results, handover_gap, read_probe, stray_outputs
+
+COLUMNS = ['rtt_ms', 'module', 'mode', 'direction', 'run', 'outcome', 'manager_downtime', 'consumer_gap', 'stray',
+           'duration', 'term']
+FAILOVER_COLUMNS = ['rtt_ms', 'module', 'trial', 'promoted_after', 'output_after', 'outcome']
+RESULT = re.compile(r'migration (\d+): (\S+) -> (\S+): (\S+) \(term (\d+), ([\d.]+) s(?:; hand-over (\d+) ms)?\)')
+
+
+class Bench:
+    def __init__(self, args: argparse.Namespace) -> None:
+        from cnr_testbed.api import Testbed
+        from cnr_testbed.rosside import RosSide
+        self.args = args
+        self.out = os.path.abspath(args.out)
+        os.makedirs(self.out, exist_ok=True)
+        self.cfg_dir = os.path.join(report.WS, 'config')
+        self.tb = Testbed(os.path.join(self.cfg_dir, 'testbed.yaml'))
+        self.robot = RosSide(self.tb, 'robot', port=args.port, log_dir=os.path.join(self.out, 'logs'))
+        self.cloud = RosSide(self.tb, 'cloud', port=args.port, log_dir=os.path.join(self.out, 'logs'))
+        self.sides = {'robot': self.robot, 'cloud': self.cloud}
+        self.mission = None
+        self.probe_file = os.path.join(self.out, 'probe.tsv')
+
+    # ---------------------------------------------------------------- helpers
+    def ns(self, side: str, *argv: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
+        s = self.sides[side]
+        return subprocess.run(['ip', 'netns', 'exec', s.namespace, *argv], env=s.env, capture_output=True,
+                              text=True, timeout=timeout)
+
+    def placement(self) -> Dict[str, str]:
+        out = self.ns('robot', 'rosrun', 'migration_manager', 'migrate', '--placement', '--timeout', '5', timeout=60)
+        return {r.split()[0]: r.split()[1] for r in out.stdout.splitlines() if r.strip() and '(migrating)' not in r}
+
+    def role(self, module: str, side: str) -> str:
+        out = self.ns(side, 'rostopic', 'echo', '-n', '1', f'/migration/{module}/{side}/status', timeout=15)
+        try:
+            return yaml.safe_load(out.stdout.split('---')[0]).get('role', '') if out.returncode == 0 else ''
+        except (yaml.YAMLError, AttributeError):
+            return ''
+
+    def wait(self, what: str, condition, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if condition():
+                return True
+            time.sleep(0.5)
+        report.progress(f'  (gave up waiting for {what} after {timeout:.0f} s)')
+        return False
+
+    def set_rtt(self, rtt_ms: float) -> None:
+        self.tb.set('both', delay=rtt_ms / 2.0, outage=False)
+
+    # ---------------------------------------------------------------- the run
+    def start(self) -> None:
+        scenario = yaml.safe_load(open(os.path.join(self.cfg_dir, 'scenarios', 'corridor.yaml')))
+        scenario['mission']['timeout'] = 6 * 3600.0
+        scenario['mission']['extra_time'] = 6 * 3600.0
+        path = os.path.join(self.out, 'scenario.yaml')
+        with open(path, 'w') as f:
+            yaml.safe_dump(scenario, f)
+        line = subprocess.run(['rosrun', 'cnr_mission', 'check_scenario', path], capture_output=True, text=True,
+                              check=True).stdout.split()
+        _name, map_file, x, y, a = line
+        from cnr_harness import Proc
+        report_dir = os.path.join(self.out, 'mission')
+        if os.path.exists(report_dir):
+            os.replace(report_dir, f'{report_dir}.prev{int(time.time())}')
+        self.mission = Proc(['rosrun', 'cnr_mission', 'two_host_mission', '--config-dir', self.cfg_dir,
+                             '--scenario', path, '--map', map_file, '--start', x, y, a, '--placement', 'all_robot',
+                             '--report-dir', report_dir, '--port', str(self.args.port), '--migration'],
+                            os.path.join(self.out, 'mission.log'))
+        report.progress(f'two-host mission with --migration starting (log {self.out}/mission.log)')
+        modules = self.args.modules
+        if not self.wait('every module active on the robot',
+                         lambda: all(self.placement().get(m) == 'robot' for m in modules), 300):
+            raise RuntimeError(f'the modules did not come up (see {self.out}/mission.log and the report logs)')
+        self.robot.call('setParam', '/migration_probe', dict(
+            topics=sorted({t for m, t in OUTPUT_TOPIC.items() if t.startswith('/')} | {'/merged_measurements'}),
+            next_goal_rate=20.0, out=self.probe_file))
+        self.robot.run(['rosrun', 'migration_manager', 'migration_probe'], 'probe')
+        report.progress('all modules active on the robot; probe running')
+
+    def migrate(self, module: str, target: str, mode: str) -> Dict:
+        t0 = time.time()
+        res = self.ns('robot', 'rosrun', 'migration_manager', 'migrate', module, target, '--mode', mode, timeout=180)
+        t1 = time.time()
+        m = RESULT.search(res.stdout)
+        out = dict(t0=t0, t1=t1, outcome='error', manager_downtime='', term='', duration=t1 - t0,
+                   text=(res.stdout + res.stderr).strip())
+        if m:
+            out.update(outcome=m.group(4), term=m.group(5), duration=float(m.group(6)),
+                       manager_downtime='' if m.group(7) is None else float(m.group(7)) / 1000.0)
+        return out
+
+    def warm_standby(self, module: str, host: str) -> bool:
+        self.ns('robot', 'rosservice', 'call', f'/migration/agents/{host}/command', 'start', module, timeout=30)
+        return self.wait(f'a warm {module} standby on {host}', lambda: self.role(module, host) == 'standby', 120)
+
+    def round_trips(self, results: report.TsvLog, rtt: float) -> None:
+        for module in self.args.modules:
+            for mode in self.args.modes:
+                for run in range(1, self.args.runs + 1):
+                    for source, target in (('robot', 'cloud'), ('cloud', 'robot')):
+                        if mode == 'hot' and not self.warm_standby(module, target):
+                            results.row(rtt_ms=rtt, module=module, mode=mode, direction=f'{source}->{target}', run=run,
+                                        outcome='no_standby', manager_downtime='', consumer_gap='', stray='',
+                                        duration=0.0, term='')
+                            continue
+                        r = self.migrate(module, target, mode)
+                        time.sleep(self.args.settle)
+                        rows = read_probe(self.probe_file)
+                        gap = handover_gap(rows, module, source, target, r['t0'], r['t1'])
+                        stray = stray_outputs(rows, module, source, target, r['t0'], r['t1'])
+                        results.row(rtt_ms=rtt, module=module, mode=mode, direction=f'{source}->{target}', run=run,
+                                    outcome=r['outcome'], manager_downtime=r['manager_downtime'],
+                                    consumer_gap='' if gap is None else gap, stray=stray,
+                                    duration=r['duration'], term=r['term'])
+                        report.progress(f'RTT {rtt:g} ms {module} {mode} {source}->{target} #{run}: {r["outcome"]}, '
+                                        f'hand-over (manager) {r["manager_downtime"]}, consumer gap '
+                                        f'{"–" if gap is None else f"{1000 * gap:.0f} ms"}, {r["duration"]:.1f} s')
+                        if r['outcome'] != 'done':
+                            report.progress(f'    {r["text"][-300:]}')
+
+    def cutoffs(self, failover: report.TsvLog, rtt: float) -> None:
+        for module in self.args.modules:
+            for trial in range(1, self.args.cutoff_trials + 1):
+                if self.placement().get(module) != 'cloud' and self.migrate(module, 'cloud', 'cold')['outcome'] != 'done':
+                    failover.row(rtt_ms=rtt, module=module, trial=trial, promoted_after='', output_after='',
+                                 outcome='not_on_cloud')
+                    continue
+                time.sleep(self.args.settle)
+                self.tb.set('both', outage=True)
+                t_cut = time.time()
+                ok = self.wait(f'{module} promoted on the robot', lambda: self.placement().get(module) == 'robot', 60)
+                promoted = time.time() - t_cut if ok else ''
+                time.sleep(2.0)
+                rows = read_probe(self.probe_file)
+                topic = OUTPUT_TOPIC[module]
+                first = next((r.time for r in rows if r.topic == topic and r.time > t_cut and r.ok and
+                              (topic == 'next_goal' or r.instance == f'{module}@robot')), None)
+                self.set_rtt(rtt)
+                failover.row(rtt_ms=rtt, module=module, trial=trial, promoted_after=promoted,
+                             output_after='' if first is None else first - t_cut, outcome='promoted' if ok else 'timeout')
+                report.progress(f'RTT {rtt:g} ms cut-off {module} #{trial}: promoted on the robot after '
+                                f'{promoted if promoted == "" else f"{promoted:.2f} s"}, output back after '
+                                f'{"–" if first is None else f"{first - t_cut:.2f} s"}')
+                self.wait(f'the cloud instance of {module} to step down', lambda: self.role(module, 'cloud') != 'active', 60)
+                time.sleep(self.args.settle)
+
+    def stop(self) -> Dict:
+        if self.mission is None:
+            return {}
+        self.mission.stop(timeout=120)
+        path = os.path.join(self.out, 'mission', 'summary.json')
+        return json.load(open(path)) if os.path.exists(path) else {}
+
+
+def write_markdown(out: str, args: argparse.Namespace, results: List[Dict], failovers: List[Dict],
+                   summary: Dict, aborted: int, started: str) -> None:
+    from cnr_benchmarks.core.migration import percentile
+    groups = group_results(results, ('rtt_ms', 'module', 'mode', 'direction'))
+    lines = [f'# Migration downtime ({started}, {platform.node()}, {os.cpu_count()} cores)', '',
+             f'`{" ".join(sys.argv) if sys.argv[0].endswith(".py") else "launch_scripts/bench_migration.sh"} '
+             f'{" ".join(args.argv)}`', '',
+             'Consumer gap: last output of the old instance to the first of the new one, measured on the robot '
+             '(migration_probe); manager: freeze answered -> first lease granted. ms; median / p95 / max.', '',
+             report.markdown_table(['RTT ms', 'module', 'mode', 'direction', 'done', 'gap p50', 'gap p95', 'gap max',
+                                    'manager p50', 'manager p95'], [g.row() for g in groups])]
+    if failovers:
+        lines += ['', 'Cut-off while active on the cloud: seconds until the robot instance is promoted / its output '
+                  'is back (median over trials).', '',
+                  report.markdown_table(['RTT ms', 'module', 'trials', 'promoted p50', 'output p50'], [
+                      [k[0], k[1], len(v), f'{percentile([float(x["promoted_after"]) for x in v if x["promoted_after"]], 50):.2f}',
+                       f'{percentile([float(x["output_after"]) for x in v if x["output_after"]], 50):.2f}']
+                      for k, v in sorted(report.group(failovers, 'rtt_ms', 'module').items())])]
+    lost = None
+    if summary:
+        lost = summary.get('measurements_published_on_robot', 0) - summary.get('measurements_taken', 0)
+    lines += ['', f'Measurements lost (merger output seen on the robot minus the active store at the end): '
+                  f'{lost if lost is not None else "–"}; move_base goals aborted: {aborted}.', '']
+    report.write_text(os.path.join(out, 'migration.md'), '\n'.join(lines))
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    ap = argparse.ArgumentParser(prog='bench_migration', description=__doc__.split('\n')[0])
+    ap.add_argument('--runs', type=int, default=10)
+    ap.add_argument('--rtts', default='0,50,100')
+    ap.add_argument('--modules', default='move_base,local_mapcell_manager,global_goal_manager,mfg')
+    ap.add_argument('--modes', default='cold,hot')
+    ap.add_argument('--cutoff-trials', type=int, default=3)
+    ap.add_argument('--settle', type=float, default=3.0, help='s after each migration before the next')
+    ap.add_argument('--out', default=os.path.join(report.DEFAULT_OUT, 'migration'))
+    ap.add_argument('--port', type=int, default=11411)
+    args = ap.parse_args(argv)
+    args.argv = list(argv if argv is not None else sys.argv[1:])
+    args.modules = [m for m in args.modules.split(',') if m]
+    args.modes = [m for m in args.modes.split(',') if m]
+    bad = [m for m in args.modes if m not in ('cold', 'hot')] + [m for m in args.modules if m not in OUTPUT_TOPIC]
+    if bad:
+        print(f'bench_migration: unknown mode or module: {", ".join(bad)}', file=sys.stderr)
+        return 2
+    rtts = report.parse_rtts('bench_migration', args.rtts)
+    started = datetime.datetime.now().strftime('%Y-%m-%d %H:%M')
+    bench = Bench(args)
+    results = report.TsvLog(os.path.join(bench.out, 'results.tsv'), COLUMNS)
+    failover = report.TsvLog(os.path.join(bench.out, 'failover.tsv'), FAILOVER_COLUMNS)
+    summary: Dict = {}
+    try:
+        bench.start()
+        for rtt in rtts:
+            bench.set_rtt(rtt)
+            report.progress(f'== RTT {rtt:g} ms')
+            time.sleep(args.settle)
+            bench.round_trips(results, rtt)
+            if args.cutoff_trials > 0:
+                bench.cutoffs(failover, rtt)
+    except KeyboardInterrupt:
+        report.progress('interrupted: writing what was measured')
+    finally:
+        summary = bench.stop()
+        results.close()
+        failover.close()
+    import csv
+    res = list(csv.DictReader(open(results.path), delimiter='\t'))
+    fo = list(csv.DictReader(open(failover.path), delimiter='\t'))
+    aborted = 0
+    if os.path.exists(bench.probe_file):
+        aborted = sum(1 for r in read_probe(bench.probe_file) if r.topic == '/move_base/result' and r.instance == '4')
+    write_markdown(bench.out, args, res, fo, summary, aborted, started)
+    report.progress(open(os.path.join(bench.out, 'migration.md')).read())
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,34 @@
+"""bench_migration's analysis: consumer-side downtime from probe rows, stray outputs, the grouped table."""
+import math
+
+from cnr_benchmarks.core.migration import ProbeRow, group_results, handover_gap, stray_outputs
+
+
+def rows(spec):
+    return [ProbeRow(t, topic, inst, ok) for t, topic, inst, ok in spec]
+
+
+def test_gap_is_last_old_to_first_new_on_the_consumer():
+    r = rows([(9.0, '/mfg/activity', 'mfg@robot', True), (10.0, '/mfg/activity', 'mfg@robot', True),
+              (10.4, '/mfg/activity', 'mfg@cloud', True), (10.9, '/mfg/activity', 'mfg@cloud', True)])
+    assert math.isclose(handover_gap(r, 'mfg', 'robot', 'cloud', 9.5, 10.5), 0.4)
+    assert stray_outputs(r, 'mfg', 'robot', 'cloud', 9.5, 10.5) == 0
+    r.append(ProbeRow(10.5, '/mfg/activity', 'mfg@robot', True))
+    assert stray_outputs(r, 'mfg', 'robot', 'cloud', 9.5, 10.5) == 1
+    assert handover_gap(r[:2], 'mfg', 'robot', 'cloud', 9.5, 10.5) is None        # the new one never spoke
+
+
+def test_gap_of_service_answers_is_the_longest_silence():
+    r = rows([(t / 20, 'next_goal', '', True) for t in range(100)] +
+             [(5.0 + t / 20, 'next_goal', '', True) for t in range(1, 40)])
+    r = [x for x in r if not 3.0 < x.time < 3.3]
+    assert math.isclose(handover_gap(r, 'global_goal_manager', 'robot', 'cloud', 2.5, 3.5), 0.3, abs_tol=1e-9)
+
+
+def test_table_groups_and_percentiles():
+    res = [dict(rtt='50', module='mfg', mode='cold', outcome='done', consumer_gap=str(g), manager_downtime='0.1')
+           for g in (0.1, 0.2, 0.3, 0.4)] + [dict(rtt='50', module='mfg', mode='cold', outcome='rolled_back',
+                                                    consumer_gap='', manager_downtime='')]
+    (g,) = group_results(res, ('rtt', 'module', 'mode'))
+    row = g.row()
+    assert row[:4] == ['50', 'mfg', 'cold', '4/5'] and row[4] == '250' and row[6] == '400'
