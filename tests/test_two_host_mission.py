@@ -111,3 +111,24 @@ def test_store_and_forward_across_outages(tmp_path):
     n = sf['appended']
     assert len(stored) >= n and stored == made[:len(stored)], f'{len(stored)} stored, {len(made)} made, {n} drained'
     assert [t for t, _ in stored] == sorted(t for t, _ in stored)
+
+
+def test_the_rule_moves_modules_as_the_link_degrades_and_recovers(tmp_path):
+    """--rule on config/trace_degrade.tsv: good, then RTT 200 ms and an outage, then good again. The MFG and the
+    global goal manager go to the cloud, back to the robot, and to the cloud again; the hotspot is still found,
+    every measurement is stored once, the report shows the placements over time and each migration."""
+    status, s, report, out = two_host(tmp_path, 'all_robot', '--rule', '--trace',
+                                      os.path.join(WS, 'config', 'trace_degrade.tsv'),
+                                      scenario=corridor(tmp_path, 170.0), timeout=600)
+    assert status in (0, 3), out[-3000:]
+    assert s['two_host']['migration'] and s['two_host']['rule']
+    done = [m for m in s['migrations'] or [] if m['outcome'] == 'done']
+    for module in ('mfg', 'global_goal_manager'):
+        moves = [(m['source'], m['target']) for m in done if m['module'] == module]
+        assert ('robot', 'cloud') in moves and ('cloud', 'robot') in moves, (module, s['migrations'])
+    with open(os.path.join(report, 'placement.tsv')) as f:
+        rows = [l.split('\t') for l in f.read().splitlines()[1:]]
+    assert {r[2] for r in rows if r[1] == 'mfg'} >= {'robot', 'cloud'}
+    numbers = [int(l.split('\t')[0]) for l in open(os.path.join(report, 'measurements.tsv')).read().splitlines()[1:]]
+    assert numbers == list(range(1, len(numbers) + 1)) and len(numbers) == s['measurements_published_on_robot']
+    assert 'Traceback' not in out
