@@ -90,7 +90,11 @@ class Bed:
         return self.rosrun('robot', *argv, timeout=120)
 
     def status(self, side):
-        out = self.rosrun(side, 'rostopic', 'echo', '-n', '1', f'/migration/{MODULE}/{side}/status', timeout=20)
+        """The instance's latched status on its host's master; None when no instance publishes one."""
+        try:
+            out = self.rosrun(side, 'rostopic', 'echo', '-n', '1', f'/migration/{MODULE}/{side}/status', timeout=8)
+        except subprocess.TimeoutExpired:
+            return None
         return yaml.safe_load(out.stdout.split('---')[0]) if out.returncode == 0 else None
 
     def rows(self):
@@ -112,10 +116,15 @@ class Bed:
 
 
 @pytest.fixture(scope='module')
-def bed(tmp_path_factory, workspace):
+def bed(workspace):
+    import pathlib
+    import shutil
+    logs = pathlib.Path(workspace, 'build', 'test_logs', 'migration_testbed')      # kept for a post-mortem
+    shutil.rmtree(logs, ignore_errors=True)
+    logs.mkdir(parents=True)
     b = None
     try:
-        b = Bed(workspace, tmp_path_factory.mktemp('mig'))
+        b = Bed(workspace, logs)
         yield b
     finally:
         if b is not None:

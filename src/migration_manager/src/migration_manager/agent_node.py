@@ -3,7 +3,7 @@
 One per host, on that host's master. It only starts modules in its configured list, each as a *standby*
 (``cnr_launch <launch_package> <launch_file> <module>:=true migration_role:=standby ...``, normally
 cnr_mission modules.launch, its own process group,
-output in ``<log_dir>/<module>-<n>.log``); promotion and freezing are the manager's business with the instance
+output in ``<log_dir>/<host>-<module>-<n>.log``); promotion and freezing are the manager's business with the instance
 itself. An instance that exits while it is wanted here (crashed, or superseded after an outage) is started
 again as a standby after ``restart_delay``.
 """
@@ -65,7 +65,7 @@ class Agent:
 
     def _start(self, slot: Slot) -> None:
         slot.started += 1
-        log = os.path.join(self.log_dir, f'{slot.module}-{slot.started}.log')
+        log = os.path.join(self.log_dir, f'{self.host}-{slot.module}-{slot.started}.log')
         slot.proc = Proc(self._argv(slot.module), log)
         slot.last_pid = slot.proc.pid
         slot.exited_at = None

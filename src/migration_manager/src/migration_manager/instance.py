@@ -1,7 +1,8 @@
 """The module side of migrations: what a movable node (mfg, local_mapcell_manager, global_goal_manager,
 move_base) uses to be started as a standby, promoted, frozen and fenced by the migration manager.
 
-A node creates one :class:`ManagedInstance` with its :class:`Hooks`. When the node runs without a migration
+A node creates one :class:`ManagedInstance` with its :class:`Hooks`, before its first subscriber (see
+:func:`_distinct_subscriber_callerid`). When the node runs without a migration
 manager (``~migration/role`` empty or absent: every single-master and fixed-placement run) the instance is
 *unmanaged*: always active, no extra topics. Managed, it follows the lease protocol of
 :mod:`migration_manager.core.lease`:
@@ -46,6 +47,10 @@ class Hooks:
     def set_state(self, state: Dict[str, Any]) -> None:
         raise NotImplementedError
 
+    def ready(self) -> bool:
+        """A standby can be promoted without losing input (e.g. its input subscriptions are connected)."""
+        return True
+
     def on_active(self) -> None:
         """Outputs open (first activation, or again after a lapse)."""
 
@@ -57,6 +62,29 @@ def topic(module: str, leaf: str) -> str:
     return f'/migration/{module}/{leaf}'
 
 
+def _distinct_subscriber_callerid(suffix: str) -> None:
+    """Make this process's subscriptions announce ``<node name>@<host>`` as their caller id.
+
+    The two instances of a module (one per host) share the node name (their topics, services and parameters
+    keep their names across a migration). A rospy publisher keeps one connection per subscriber caller id and
+    drops the older one when a second arrives (``_TopicImpl.add_connection``), so without this the standby's
+    subscription would silently cut the active instance off from every publisher both subscribe to (its
+    inputs, and the manager's lease answers). The caller id in the TCPROS header is used by publishers only to
+    tell connections apart; registrations with the masters keep the node's real name.
+    """
+    from rospy.impl import tcpros_pubsub
+    original = tcpros_pubsub.TCPROSSub.get_header_fields
+    if getattr(original, '_cnr_instance_suffix', None) is not None:
+        return
+
+    def get_header_fields(self):
+        fields = original(self)
+        fields['callerid'] = f"{fields['callerid']}@{suffix}"
+        return fields
+    get_header_fields._cnr_instance_suffix = suffix
+    tcpros_pubsub.TCPROSSub.get_header_fields = get_header_fields
+
+
 class ManagedInstance:
     def __init__(self, module: str, hooks: Hooks, namespace: str = '~migration') -> None:
         self.module = module
@@ -64,6 +92,8 @@ class ManagedInstance:
         section = private_section(namespace)
         self.role_param = section.string('role', '') if 'role' in section else ''
         self.managed = bool(self.role_param)
+        if self.managed:
+            _distinct_subscriber_callerid(section.string('host'))
         self.lock = threading.RLock()
         self.frozen = False
         self.was_active = False
@@ -115,8 +145,10 @@ class ManagedInstance:
 
     def _status(self) -> None:
         with self.lock:
-            msg = InstanceStatus(module=self.module, instance=self.id, role=self._role(), term=self.holder.term,
-                                 ready=True, pid=os.getpid(), message=self.message)
+            role = self._role()
+        ready = role != 'standby' or bool(self.hooks.ready())
+        msg = InstanceStatus(module=self.module, instance=self.id, role=role, term=self.holder.term,
+                             ready=ready, pid=os.getpid(), message=self.message)
         msg.header.stamp = rospy.Time.from_sec(time.time())
         self.status_pub.publish(msg)
 
@@ -136,7 +168,9 @@ class ManagedInstance:
     def _on_control(self, req) -> InstanceControlResponse:
         try:
             if req.command == 'state':
-                return InstanceControlResponse(ok=True, message='', term=self.holder.term, state=self._state_bytes())
+                ready = self.holder.term > 0 or bool(self.hooks.ready())
+                return InstanceControlResponse(ok=True, message='ready' if ready else 'not ready',
+                                               term=self.holder.term, state=self._state_bytes())
             if req.command == 'freeze':
                 with self.lock:
                     if self.holder.term != req.term:
@@ -155,6 +189,7 @@ class ManagedInstance:
                         self.hooks.set_state(state_codec.decode(self.module, req.state))
                     self.holder.promoted(req.term)
                     self.frozen = False
+                    self.was_active = False       # the loop reports "active" anew, not a lapse
                 self.message = f'promoted to term {req.term}'
                 rospy.loginfo(f'{self.id}: promoted to term {req.term}'
                               f'{f" with a state of {len(req.state)} bytes" if req.state else ""}')

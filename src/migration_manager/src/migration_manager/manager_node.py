@@ -120,8 +120,9 @@ class Manager:
         return call_with_timeout(proxy, self.cfg.control_call, *args)
 
     def _instance_up(self, module: str, host: str) -> bool:
+        """The instance answers and is ready (a standby's inputs are connected)."""
         ok, res = self._call(self.control[(module, host)], 'state', 0, b'')
-        return ok and res.ok
+        return ok and res.ok and res.message != 'not ready'
 
     # ------------------------------------------------------------------ migrations
     def _event(self, mid: int, m: Migration, message: str) -> None:
@@ -156,8 +157,9 @@ class Manager:
             with self.lock:
                 actions = m.begin(time.monotonic(), ready)
             while True:
-                for verb, host, detail in actions:
-                    self._do(run, verb, host, detail)
+                while actions:                       # an action's outcome may call for more actions
+                    verb, host, detail = actions.pop(0)
+                    actions += self._do(run, verb, host, detail)
                 with self.lock:
                     for ev in m.events[seen:]:
                         self._event(mid, m, ev.message)
@@ -175,7 +177,7 @@ class Manager:
 
     def _standby(self, book: ModuleBook, host: str) -> bool:
         st = book.status.get(host)
-        return st is not None and st.role == 'standby'
+        return st is not None and st.role == 'standby' and st.ready
 
     def _poll(self, book: ModuleBook, run: Run) -> List:
         """Events from the world, then deadlines (caller holds the lock)."""
@@ -201,30 +203,34 @@ class Manager:
             return m.target_failed(now, 'the target was superseded')
         return m.tick(now)
 
-    def _do(self, run: Run, verb: str, host: str, detail) -> None:
-        """One action of a migration (no lock held: calls may take up to control_call)."""
+    def _do(self, run: Run, verb: str, host: str, detail) -> List:
+        """One action of a migration (no lock held: calls may take up to control_call); returns the actions its
+        outcome calls for."""
         m = run.migration
         if verb == 'start_standby':
             ok, res = self._call(self.agents[host], 'start', m.module)
             if ok and res.ok:
                 run.agent_pid = res.pid
-            if not ok or not res.ok:
-                with self.lock:
-                    m.target_failed(time.monotonic(), f'agent on {host}: {res if not ok else res.message}')
-        elif verb == 'freeze':
+                return []
+            with self.lock:
+                return m.target_failed(time.monotonic(), f'agent on {host}: {res if not ok else res.message}')
+        if verb == 'freeze':
             ok, res = self._call(self.control[(m.module, host)], 'freeze', detail, b'')
             with self.lock:
                 if ok and res.ok:
-                    m.frozen(time.monotonic(), bytes(res.state))
-                else:
-                    m.source_unreachable(time.monotonic())
-        elif verb == 'promote':
+                    return m.frozen(time.monotonic(), bytes(res.state))
+                return m.source_unreachable(time.monotonic())
+        if verb == 'promote':
             term, state = detail
             ok, res = self._call(self.control[(m.module, host)], 'promote', term, state or b'')
-            if not ok or not res.ok:
-                with self.lock:
-                    m.target_failed(time.monotonic(), f'promotion refused: {res if not ok else res.message}')
-        elif verb == 'retire':
+            if ok and res.ok:
+                return []
+            with self.lock:
+                if host == m.target:
+                    return m.target_failed(time.monotonic(), f'promotion refused: {res if not ok else res.message}')
+            rospy.logerr(f'{m.module}: reinstating {host} failed: {res if not ok else res.message}')
+            return []
+        if verb == 'retire':
             if detail == 'cold' or m.module not in self.cfg.hot_standby:
                 self._call(self.agents[host], 'stop', m.module)
             else:                     # hot: the old instance makes way for a fresh standby there
@@ -232,6 +238,7 @@ class Manager:
                 self._call(self.agents[host], 'start', m.module)
         elif verb == 'stop':
             self._call(self.agents[host], 'stop', m.module)
+        return []
 
     def _on_migrate(self, req) -> MigrateResponse:
         started = time.monotonic()
