@@ -8,7 +8,9 @@ both; times are the node's clock (sim time) in seconds.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Optional
+from typing import Any, Dict, Optional
+
+from mfg.core.statecheck import state_section
 
 
 @dataclass
@@ -49,3 +51,19 @@ class ActivityTracker:
             gap = max(gap, now - self._last_input)
         return ActivityReport(self.measurements, gap, self.goal_waits, self._wait_total, self._wait_longest,
                               max(gap, self._wait_longest))
+
+    # -- migration state (the package README, "Migration state") -----------------------------------------
+    def state(self) -> Dict[str, Any]:
+        """The counters (times in s of the node's clock; ``last_input`` null before the first measurement)."""
+        return {'measurements': self.measurements, 'last_input': self._last_input, 'longest_gap': self._longest_gap,
+                'goal_waits': self.goal_waits, 'wait_total': self._wait_total, 'wait_longest': self._wait_longest}
+
+    def restore(self, state: Dict[str, Any], field: str = 'activity') -> None:
+        """Take over :meth:`state` of another instance (ValueError naming ``field.key`` if it does not fit)."""
+        sec = state_section(state, field)
+        values = (sec.integer('measurements', minimum=0),
+                  None if sec.raw('last_input') is None else sec.number('last_input'),
+                  sec.number('longest_gap', nonnegative=True), sec.integer('goal_waits', minimum=0),
+                  sec.number('wait_total', nonnegative=True), sec.number('wait_longest', nonnegative=True))
+        (self.measurements, self._last_input, self._longest_gap, self.goal_waits, self._wait_total,
+         self._wait_longest) = values

@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any, Dict
 
 from cnr_params import ConfigError, Section
+from mfg.core.statecheck import state_section
 
 MODES = ('ambient', 'statistics')
 
@@ -55,3 +57,21 @@ class Detector:
             self.mean += d / self.n
             self.m2 += d * (temperature - self.mean)
         return abnormal
+
+    # -- migration state (the package README, "Migration state") -----------------------------------------
+    def state(self) -> Dict[str, Any]:
+        """The threshold statistics: ``n`` measurements [count] judged normal, their ``mean`` [degC] and ``m2``
+        (sum of squared deviations from the mean, [degC^2]; Welford)."""
+        return {'n': self.n, 'mean': self.mean, 'm2': self.m2}
+
+    def restore(self, state: Dict[str, Any], field: str = 'detector') -> None:
+        """Take over :meth:`state` of another instance (the configuration stays this one's).
+
+        Raises:
+            ValueError: a key is missing or has a wrong type or value (the message names ``field.key``).
+        """
+        sec = state_section(state, field)
+        n = sec.integer('n', minimum=0)
+        mean = sec.number('mean')
+        m2 = sec.number('m2', nonnegative=True)
+        self.n, self.mean, self.m2 = n, mean, m2

@@ -6,10 +6,12 @@ the time it last measured in each cell.
 """
 from __future__ import annotations
 
-from typing import Dict, Optional, Tuple
+from typing import Any, Dict, Optional, Tuple
 
 from cnr_maps.grid import MapcellGrid
 from global_goal_manager.core.policies import CellView, LeastRecentlyVisited
+from mfg.core import statecheck
+from mfg.core.statecheck import state_section
 
 
 class LocalGoals:
@@ -30,3 +32,16 @@ class LocalGoals:
         views = [CellView(c.index, c.row, c.col, c.center_x, c.center_y, self.last_visit.get(c.index, 0.0))
                  for c in grid.cells()]
         return self._policy.next_cell(views, grid.index_of(*robot_xy), robot_xy)
+
+    # -- migration state (the package README, "Migration state") -----------------------------------------
+    def state(self) -> Dict[str, Any]:
+        """The visit times: ``{'last_visit': [[cell, t], ...]}`` (t: the last measurement's stamp there [s])."""
+        return {'last_visit': [[c, t] for c, t in sorted(self.last_visit.items())]}
+
+    def restore(self, state: Dict[str, Any], cells: Optional[int] = None, field: str = 'local_goals') -> None:
+        """Take over :meth:`state` of another instance (ValueError naming ``field.key`` if it does not fit)."""
+        sec = state_section(state, field)
+        visits = {}
+        for c, t in statecheck.rows(sec, 'last_visit', 2):
+            visits[statecheck.check_cell(sec, 'last_visit', c, cells)] = statecheck.number(sec, 'last_visit', t)
+        self.last_visit = visits

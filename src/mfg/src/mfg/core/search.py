@@ -14,7 +14,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Callable, Dict, List, Optional, Sequence
+from typing import Any, Callable, Dict, List, Optional, Sequence
+
+from mfg.core import statecheck
+from mfg.core.statecheck import state_section
+
+OUTCOMES = ('cooler', 'hotter', 'unreachable')
 
 
 @dataclass
@@ -109,3 +114,66 @@ class HotspotSearch:
         step = SearchStep(cell, math.nan, 'unreachable')
         self.history.append(step)
         return step
+
+    # -- migration state (the package README, "Migration state") -----------------------------------------
+    def state(self) -> Dict[str, Any]:
+        """Everything the search knows, as JSON-able values (cells are indices, temperatures degC).
+
+        ``known``: ``[[cell, mean], ...]``; ``history``: ``[[cell, mean (NaN when unreachable), outcome], ...]``.
+        The search is done when ``unchecked`` is empty.
+        """
+        return {'ic': self.ic, 'ic_mean': self.ic_mean, 'previous': self.previous,
+                'known': [[c, m] for c, m in self.known.items()],
+                'checked': list(self.checked), 'unchecked': list(self.unchecked),
+                'history': [[h.cell, h.mean, h.outcome] for h in self.history],
+                'ic_history': list(self.ic_history)}
+
+    @classmethod
+    def from_state(cls, neighbours: Callable[[int], Sequence[int]], state: Dict[str, Any], cells: Optional[int],
+                   field: str = 'search') -> 'HotspotSearch':
+        """A search that goes on exactly where :meth:`state` of another instance left off.
+
+        Args:
+            neighbours: cell -> its neighbour cells (this instance's grid).
+            state: :meth:`state`.
+            cells: the number of cells of the grid (every cell index is checked against it).
+            field: where the state sits in the node's state (for error messages).
+
+        Raises:
+            ValueError: a key is missing or has a wrong type, or the directions are not the IC's neighbours
+                (a state made on another grid); the message names ``field.key``.
+        """
+        sec = state_section(state, field)
+        ic = statecheck.cell(sec, 'ic', cells)
+        try:
+            around = list(neighbours(ic))
+        except (IndexError, ValueError) as exc:
+            raise sec.error('ic', f'cell {ic}: {exc}') from None
+        ic_mean = sec.number('ic_mean')
+        previous = statecheck.cell(sec, 'previous', cells, optional=True)
+        known: Dict[int, float] = {}
+        for c, m in statecheck.rows(sec, 'known', 2):
+            known[statecheck.check_cell(sec, 'known', c, cells)] = statecheck.number(sec, 'known', m)
+        checked = statecheck.cell_list(sec, 'checked', cells)
+        unchecked = statecheck.cell_list(sec, 'unchecked', cells)
+        for key, directions in (('checked', checked), ('unchecked', unchecked)):
+            strangers = [c for c in directions if c not in around]
+            if strangers:
+                raise sec.error(key, f'cells {strangers} are not neighbours of the investigation cell {ic} '
+                                     f'(a state made on another grid?)')
+        if set(checked) & set(unchecked):
+            raise sec.error('unchecked', f'cells {sorted(set(checked) & set(unchecked))} are also checked')
+        history = []
+        for c, m, outcome in statecheck.rows(sec, 'history', 3):
+            if outcome not in OUTCOMES:
+                raise sec.error('history', f"unknown outcome {outcome!r} (expected one of: {', '.join(OUTCOMES)})")
+            history.append(SearchStep(statecheck.check_cell(sec, 'history', c, cells),
+                                      statecheck.number(sec, 'history', m, allow_nan=True), outcome))
+        ic_history = statecheck.cell_list(sec, 'ic_history', cells)
+        if not ic_history or ic_history[-1] != ic:
+            raise sec.error('ic_history', f'must end with the investigation cell {ic}, got {ic_history}')
+        search = cls.__new__(cls)         # not __init__: that would start a new search around ic
+        search.neighbours, search.ic, search.ic_mean, search.previous = neighbours, ic, ic_mean, previous
+        search.known, search.checked, search.unchecked = known, checked, unchecked
+        search.history, search.ic_history = history, ic_history
+        return search
