@@ -8,7 +8,7 @@ import os
 import pytest
 
 from cnr_maps.grid import MapcellGrid
-from cnr_maps.measurements import HEADER_LINE, format_row, read_tsv
+from cnr_maps.measurements import HEADER, HEADER_LINE, format_row, read_tsv
 from local_mapcell_manager.core.ledger import DUPLICATE, OUTSIDE, STORED, Dedup, Ledger, Reading, parse_state
 from local_mapcell_manager.core.store import MeasurementStore
 from migration_manager.core import state as codec
@@ -104,6 +104,7 @@ def test_state_round_trip_through_the_wire(tmp_path):
     a.receive(reading(40))                                 # stored, not published: handed over as pending
     state = wire(a.state())
     assert set(state) == {'grid', 'measurements', 'newest', 'unpublished', 'duplicates', 'outside'}
+    assert list(state['measurements']) == HEADER                       # the store's columns
     assert state['unpublished'] == {'measurement': [a.count], 'yaw': [pytest.approx(4.0)]}
 
     b = ledger(tmp_path, 'b', active=False)

@@ -267,17 +267,9 @@ class Ledger:
         """The state handed over (JSON-able; every list is a copy)."""
         ms = self.c.book.measurements()
         g = self.grid
-        cols: Dict[str, List[Any]] = {name: [] for name in HEADER}
-        for m in ms:
-            cols['measurement'].append(m.number)
-            cols['time'].append(m.time)
-            cols['x'].append(m.x)
-            cols['y'].append(m.y)
-            cols['temperature'].append(m.temperature)
-            cols['cell'].append(m.cell)
-            cols['row'].append(m.row)
-            cols['col'].append(m.col)
-            cols['pose_time'].append(m.pose_time)
+        cols = {'measurement': [m.number for m in ms], 'time': [m.time for m in ms], 'x': [m.x for m in ms],
+                'y': [m.y for m in ms], 'temperature': [m.temperature for m in ms], 'cell': [m.cell for m in ms],
+                'row': [m.row for m in ms], 'col': [m.col for m in ms], 'pose_time': [m.pose_time for m in ms]}
         unpublished = list(self.c.unpublished.items())
         return {
             'grid': {'min_x': g.min_x, 'min_y': g.min_y, 'cell_size': g.cell_size, 'cols': g.cols, 'rows': g.rows},
