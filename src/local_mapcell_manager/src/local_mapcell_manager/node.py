@@ -89,11 +89,11 @@ class ManagerNode(Hooks):
         if self.instance.managed and self.pub is None:     # active again after a freeze (rolled back)
             self.pub = self.instance.publisher('cell_states', CellStates, queue_size=1, latch=True)
         with self.instance.lock, self.lock:
+            own = self.ledger.count
             replay = self.ledger.activated()
             self._dirty = True
         if replay is not None and self.instance.managed:
-            rospy.loginfo(f'promoted without a state: {self.ledger.count} measurements of its own; '
-                          f'{self._replayed(replay)}')
+            rospy.loginfo(f'promoted without a state: {own} measurements of its own; {self._replayed(replay)}')
         if not self.services:
             self.services = [
                 rospy.Service('~get_cell', GetCell, self._get_cell),
