@@ -1,9 +1,14 @@
-"""``local_mapcell_manager``: mapcells with visits, measurements and statistics; services and a disk store."""
+"""``local_mapcell_manager``: mapcells with visits, measurements and statistics; services and a disk store.
+
+Movable by migration_manager: as a managed standby it buffers ``merged_measurements`` but stores, publishes and
+serves nothing; on promotion it takes over the handed-over store (every measurement) and replays its buffer
+over it, so the measurements stored end up exactly once (README "Migration state")."""
 from __future__ import annotations
 
 import math
 import os
 import threading
+from typing import Any, Dict, Optional
 
 import rospy
 
@@ -15,8 +20,12 @@ from cnr_msgs.srv import (GetCell, GetCellResponse, GetCellStates, GetCellStates
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.measurements import Measurement
 from cnr_params.ros import init_node, private_section, quiet_at_shutdown
+from local_mapcell_manager.core.ledger import DUPLICATE, Ledger, Reading, Replay
 from local_mapcell_manager.core.params import ManagerParams, read_params
 from local_mapcell_manager.core.store import CellBook, MeasurementStore
+from migration_manager.instance import Hooks, ManagedInstance
+
+NOT_ACTIVE = 'not the active instance (standby, frozen or lease lapsed)'
 
 
 def cell_msg(grid: MapcellGrid, book: CellBook, index: int) -> CellStateMsg:
@@ -28,12 +37,11 @@ def cell_msg(grid: MapcellGrid, book: CellBook, index: int) -> CellStateMsg:
                         min_temperature=s.min, max_temperature=s.max)
 
 
-def _key(time: float, x: float, y: float, temperature: float) -> tuple:
-    """A measurement's identity at the store's precision (cnr_maps.measurements: 6 decimals of s, 4 of m, degC)."""
-    return round(time, 6), round(x, 4), round(y, 4), round(temperature, 4)
+class ManagerNode(Hooks):
+    """Lock order: ``self.instance.lock``, then ``self.lock`` (the instance calls ``set_state`` and, on a freeze,
+    ``get_state`` holding its lock). A reading is stored and published under both, so a freeze (the final state
+    taken) falls between two readings: what the frozen instance published is exactly what its state says."""
 
-
-class ManagerNode:
     def __init__(self, p: ManagerParams) -> None:
         self.p = p
         self.grid = p.grid
@@ -41,66 +49,132 @@ class ManagerNode:
         if p.reset_store and os.path.exists(p.store):
             os.replace(p.store, p.store + '.old')
             rospy.loginfo(f'reset_store: moved the previous store to {p.store}.old')
-        self.store = MeasurementStore(p.store, rospy.logwarn)
-        self.book = CellBook(self.grid)
-        for m in self.store.load(self.grid):
-            self.book.add(m)
+        self.ledger = Ledger(self.grid, MeasurementStore(p.store, rospy.logwarn), p.standby_buffer, rospy.logwarn)
         rospy.loginfo(f'{len(self.grid)} mapcells ({self.grid.cols} x {self.grid.rows} of {self.grid.cell_size:g} m); '
-                      f'{self.book.count} stored measurements reloaded from {p.store}')
-        self.outside = 0
-        # a measurement is stored once: one older than the newest stored one, or equal to it in stamp and values,
-        # is a duplicate (a store-and-forward receiver that crashed between delivering and saving its mark
-        # delivers again); two different readings with one stamp are both kept
-        stored = self.book.measurements()
-        self.newest = _key(stored[-1].time, stored[-1].x, stored[-1].y, stored[-1].temperature) if stored else None
-        self.duplicates = 0
-        self.pub = rospy.Publisher('cell_states', CellStates, queue_size=1, latch=True)
-        self.measurement_pub = rospy.Publisher('mapcell_measurements', MergedMeasurement, queue_size=100)
+                      f'{self.ledger.count} stored measurements reloaded from {p.store}')
         self._dirty = True
-        self._last_pub = -math.inf
-        rospy.Service('~get_cell', GetCell, self._get_cell)
-        rospy.Service('~get_cell_states', GetCellStates, lambda _r: GetCellStatesResponse(self._states()))
-        rospy.Service('~get_measurements', GetMeasurements, self._get_measurements)
+        self.services: list = []
+        self._constructed = threading.Event()          # on_active (instance thread) waits for the publishers
+        self.instance: Optional[ManagedInstance] = None
+        # subscribed before the instance announces itself as a standby: the buffer starts as early as possible
         rospy.Subscriber('merged_measurements', MergedMeasurement, self._on_measurement, queue_size=100)
+        self.instance = ManagedInstance('local_mapcell_manager', self)
+        # created now, used once active: subscribers are connected by the time the pending ones are published
+        self.pub: Optional[rospy.Publisher] = self.instance.publisher('cell_states', CellStates, queue_size=1,
+                                                                      latch=True)
+        self.measurement_pub = self.instance.publisher('mapcell_measurements', MergedMeasurement, queue_size=100)
         rospy.Timer(rospy.Duration(p.publish_period), lambda _e: self._publish())
-        self._publish(force=True)
+        self._constructed.set()
+        if not self.instance.managed:
+            self.on_active()
+        else:
+            rospy.loginfo('managed: standby until promoted (merged measurements are buffered, '
+                          f'at most {p.standby_buffer})')
 
-    def _states(self) -> CellStates:
+    # -- migration (README "Migration state") -----------------------------------------------------
+    def get_state(self) -> Dict[str, Any]:
+        with self.instance.lock, self.lock:            # (reentrant: a freeze calls this holding instance.lock)
+            self._sync_frozen()
+            return self.ledger.state()
+
+    def set_state(self, state: Dict[str, Any]) -> None:
         with self.lock:
-            msg = CellStates(rows=self.grid.rows, cols=self.grid.cols, cell_size=self.grid.cell_size,
-                             cells=[cell_msg(self.grid, self.book, i) for i in range(len(self.grid))])
-        msg.header.stamp = rospy.Time.now()
-        msg.header.frame_id = self.p.frame_id
-        return msg
+            replay = self.ledger.restore(state)        # ValueError: refused, nothing changed
+            self._dirty = True
+            count = self.ledger.count
+        rospy.loginfo(f'state taken over: {count} measurements; {self._replayed(replay)}')
 
-    def _publish(self, force: bool = False) -> None:
-        if self._dirty or force:
-            self._dirty = False
-            self.pub.publish(self._states())
+    def on_active(self) -> None:
+        self._constructed.wait()
+        if self.instance.managed and self.pub is None:     # active again after a freeze (rolled back)
+            self.pub = self.instance.publisher('cell_states', CellStates, queue_size=1, latch=True)
+        with self.instance.lock, self.lock:
+            own = self.ledger.count
+            replay = self.ledger.activated()
+            self._dirty = True
+        if replay is not None and self.instance.managed:
+            rospy.loginfo(f'promoted without a state: {own} measurements of its own; {self._replayed(replay)}')
+        if not self.services:
+            self.services = [
+                rospy.Service('~get_cell', GetCell, self._get_cell),
+                rospy.Service('~get_cell_states', GetCellStates, self._get_cell_states),
+                rospy.Service('~get_measurements', GetMeasurements, self._get_measurements)]
+        with self.instance.lock:
+            with self.lock:
+                self._flush()
+            self._publish(force=True)
 
+    def on_frozen(self) -> None:
+        with self.instance.lock, self.lock:
+            self._sync_frozen()
+            pub, self.pub = self.pub, None
+        for s in self.services:
+            s.shutdown('frozen for a migration')
+        self.services = []
+        if pub is not None:
+            pub.unregister()          # no latched cell_states of a frozen instance for late subscribers
+
+    def _sync_frozen(self) -> None:
+        """Under self.lock: a frozen instance stores nothing more and buffers again (a rollback may promote it
+        again). Called where the instance's freeze is observed: in get_state, which the freeze calls holding
+        the instance's lock, the final state is taken in the same step."""
+        if self.instance.frozen and self.ledger.freeze():
+            rospy.loginfo(f'frozen: {self.ledger.count} measurements handed over; buffering from now on')
+
+    @staticmethod
+    def _replayed(r: Replay) -> str:
+        return (f'replayed {r.buffered} buffered measurement(s): {r.stored} new, {r.known} already stored, '
+                f'{r.outside} outside the grid')
+
+    # -- the stream --------------------------------------------------------------------------------
     @quiet_at_shutdown
     def _on_measurement(self, msg: MergedMeasurement) -> None:
         values = (msg.x, msg.y, msg.temperature, msg.header.stamp.to_sec())
         if not all(math.isfinite(v) for v in values):
             rospy.logwarn_throttle(5.0, f'ignored a merged measurement with non-finite values {values}')
             return
+        r = Reading(msg.header.stamp.to_sec(), msg.x, msg.y, msg.temperature, msg.pose_stamp.to_sec(), msg.yaw)
+        if self.instance is None:                      # still starting: the ledger only buffers
+            with self.lock:
+                self.ledger.receive(r)
+            return
+        with self.instance.lock, self.lock:
+            self._sync_frozen()
+            outcome, m = self.ledger.receive(r)
+            if outcome == DUPLICATE:
+                rospy.logwarn_throttle(5.0, f'ignored {self.ledger.duplicates} measurement(s) older than or equal '
+                                            f'to the newest stored one (duplicates or out of order)')
+            if m is not None:
+                self._dirty = True
+                if self.instance.active:
+                    self._flush()
+
+    def _flush(self) -> None:
+        """Under both locks, while active: publish the stored measurements not published yet (a lapse, or the
+        ones handed over or replayed at a promotion), in order."""
+        if not self.instance.active:
+            return
+        pending = self.ledger.pending()
+        for m, yaw in pending:
+            self.measurement_pub.publish(self._measurement_msg(m, yaw))
+        self.ledger.published(m.number for m, _ in pending)
+
+    def _states(self) -> CellStates:
         with self.lock:
-            key = _key(msg.header.stamp.to_sec(), msg.x, msg.y, msg.temperature)
-            if self.newest is not None and (key[0] < self.newest[0] or key == self.newest):
-                self.duplicates += 1
-                rospy.logwarn_throttle(5.0, f'ignored {self.duplicates} measurement(s) older than or equal to the '
-                                            f'newest stored one (duplicates or out of order)')
+            msg = CellStates(rows=self.grid.rows, cols=self.grid.cols, cell_size=self.grid.cell_size,
+                             cells=[cell_msg(self.grid, self.ledger.book, i) for i in range(len(self.grid))])
+        msg.header.stamp = rospy.Time.now()
+        msg.header.frame_id = self.p.frame_id
+        return msg
+
+    @quiet_at_shutdown
+    def _publish(self, force: bool = False) -> None:
+        with self.instance.lock:
+            if self.pub is None or not self.instance.active:
                 return
-            self.newest = key
-            m = self.book.new_measurement(msg.header.stamp.to_sec(), msg.x, msg.y, msg.temperature,
-                                          msg.pose_stamp.to_sec())
-            if m is None:
-                self.outside += 1
-                return
-            self.store.append(m)
-            self.book.add(m)
-        self.measurement_pub.publish(self._measurement_msg(m, msg.yaw))
-        self._dirty = True
+            if self._dirty or force:
+                self._dirty = False
+                self.pub.publish(self._states())
 
     def _measurement_msg(self, m: Measurement, yaw: float = math.nan) -> MergedMeasurement:
         """A stored measurement as a message: its cell filled, its store number in header.seq."""
@@ -112,19 +186,29 @@ class ManagerNode:
         mm.header.seq = m.number
         return mm
 
+    # -- services (only while active) --------------------------------------------------------------
     def _get_cell(self, req) -> GetCellResponse:
+        if not self.instance.active:
+            raise rospy.ServiceException(NOT_ACTIVE)
         index = self.grid.index_of(req.x, req.y)
         if index is None:
             return GetCellResponse(found=False)
         with self.lock:
-            return GetCellResponse(found=True, cell=cell_msg(self.grid, self.book, index))
+            return GetCellResponse(found=True, cell=cell_msg(self.grid, self.ledger.book, index))
+
+    def _get_cell_states(self, _req) -> GetCellStatesResponse:
+        if not self.instance.active:
+            raise rospy.ServiceException(NOT_ACTIVE)
+        return GetCellStatesResponse(self._states())
 
     def _get_measurements(self, req) -> GetMeasurementsResponse:
+        if not self.instance.active:
+            return GetMeasurementsResponse(success=False, message=NOT_ACTIVE)
         if req.cell_index != -1 and not 0 <= req.cell_index < len(self.grid):
             return GetMeasurementsResponse(success=False, message=f'no cell {req.cell_index} '
                                                                    f'(0..{len(self.grid) - 1} or -1 for all)')
         with self.lock:
-            ms = self.book.measurements(None if req.cell_index == -1 else req.cell_index)
+            ms = self.ledger.measurements(None if req.cell_index == -1 else req.cell_index)
         out = [self._measurement_msg(m) for m in ms]
         return GetMeasurementsResponse(success=True, message=f'{len(out)} measurements', measurements=out)
 

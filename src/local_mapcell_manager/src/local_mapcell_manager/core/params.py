@@ -21,6 +21,7 @@ class ManagerParams:
     map_file: str
     publish_period: float
     frame_id: str
+    standby_buffer: int          # readings a migration standby keeps (README "Migration state")
 
 
 def read_grid(p: Section, occupancy: OccupancyMap) -> MapcellGrid:
@@ -35,4 +36,4 @@ def read_params(p: Section) -> ManagerParams:
     return ManagerParams(grid=read_grid(p, load_map(map_file)), store=os.path.expanduser(p.string('store')),
                          reset_store=p.boolean('reset_store'), map_file=map_file,
                          publish_period=1.0 / p.number('max_publish_rate', positive=True),
-                         frame_id=p.string('frame_id'))
+                         frame_id=p.string('frame_id'), standby_buffer=p.integer('standby_buffer', minimum=1))

@@ -3,14 +3,18 @@
 The store is a TSV file in the format of :mod:`cnr_maps.measurements` (the thesis's tab-separated columns),
 one merged measurement per line, flushed and fsync'ed per line. On start the file is read back to rebuild
 every cell's state, so a restart loses nothing. A truncated last line (a crash while writing) is skipped with
-a warning and never truncated further: new lines start on a fresh line.
+a warning and never truncated further: new lines start on a fresh line. The only rewrite (a migration's
+hand-over, :meth:`MeasurementStore.replace`) is atomic: a temporary file renamed over the store.
 """
 from __future__ import annotations
 
+import contextlib
 import math
 import os
+import stat
+import tempfile
 from dataclasses import dataclass, field
-from typing import Callable, List, Optional
+from typing import Callable, List, Optional, Sequence
 
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.measurements import HEADER_LINE, Measurement, format_row, is_header, parse_row
@@ -122,10 +126,46 @@ class MeasurementStore:
         return out
 
     def append(self, m: Measurement) -> None:
+        self.append_many([m])
+
+    def append_many(self, ms: Sequence[Measurement]) -> None:
+        """Append rows with one write and one fsync."""
+        if not ms:
+            return
         with open(self.path, 'a') as f:
             if self._needs_newline:
                 f.write('\n')
                 self._needs_newline = False
-            f.write(format_row(m))
+            f.write(''.join(format_row(m) for m in ms))
             f.flush()
             os.fsync(f.fileno())
+
+    def replace(self, ms: Sequence[Measurement]) -> None:
+        """Rewrite the whole file with exactly these rows, atomically: they are written to a temporary file in
+        the same directory, fsync'ed and renamed over the store, so a crash leaves the old file or the new one,
+        never a truncated one.
+
+        Raises:
+            OSError: the file could not be written (the old file is then unchanged).
+        """
+        directory = os.path.dirname(os.path.abspath(self.path))
+        fd, tmp = tempfile.mkstemp(prefix=os.path.basename(self.path) + '.', suffix='.tmp', dir=directory)
+        try:
+            with os.fdopen(fd, 'w') as f:
+                f.write(HEADER_LINE)
+                f.write(''.join(format_row(m) for m in ms))
+                f.flush()
+                os.fsync(f.fileno())
+            with contextlib.suppress(OSError):     # keep the old file's permissions (mkstemp makes it 0600)
+                os.chmod(tmp, stat.S_IMODE(os.stat(self.path).st_mode))
+            os.replace(tmp, self.path)
+        except BaseException:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+            raise
+        dir_fd = os.open(directory, os.O_RDONLY)
+        try:
+            os.fsync(dir_fd)                       # the rename itself survives a crash
+        finally:
+            os.close(dir_fd)
+        self._needs_newline = False
