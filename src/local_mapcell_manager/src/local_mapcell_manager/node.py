@@ -56,9 +56,12 @@ class ManagerNode(Hooks):
         self.services: list = []
         self._constructed = threading.Event()          # on_active (instance thread) waits for the publishers
         self.instance: Optional[ManagedInstance] = None
-        # subscribed before the instance announces itself as a standby: the buffer starts as early as possible
-        rospy.Subscriber('merged_measurements', MergedMeasurement, self._on_measurement, queue_size=100)
+        self.sub: Optional[rospy.Subscriber] = None
+        # the instance first (a managed one's subscriptions must carry its host in their caller id); a standby
+        # reports ready only once its merged_measurements subscription is connected (hooks.ready), so the
+        # manager never freezes the active instance before this one buffers what follows
         self.instance = ManagedInstance('local_mapcell_manager', self)
+        self.sub = rospy.Subscriber('merged_measurements', MergedMeasurement, self._on_measurement, queue_size=100)
         # created now, used once active: subscribers are connected by the time the pending ones are published
         self.pub: Optional[rospy.Publisher] = self.instance.publisher('cell_states', CellStates, queue_size=1,
                                                                       latch=True)
@@ -72,6 +75,9 @@ class ManagerNode(Hooks):
                           f'at most {p.standby_buffer})')
 
     # -- migration (README "Migration state") -----------------------------------------------------
+    def ready(self) -> bool:
+        return self.sub is not None and self.sub.get_num_connections() > 0
+
     def get_state(self) -> Dict[str, Any]:
         with self.instance.lock, self.lock:            # (reentrant: a freeze calls this holding instance.lock)
             self._sync_frozen()

@@ -281,7 +281,13 @@ class Manager:
             _, m = self.run_migration(module, host, 'cold')
             if m.step is not Step.DONE and host != self.cfg.authority:
                 rospy.logwarn(f'{module}: cannot start on {host} ({m.error}): starting it on {self.cfg.authority}')
-                self.run_migration(module, self.cfg.authority, 'cold')
+                _, m = self.run_migration(module, self.cfg.authority, 'cold')
+            while m.step is not Step.DONE and not rospy.core.is_shutdown_requested():
+                # the robot's own agent may still be starting: keep trying there (it never depends on the cloud)
+                rospy.logwarn_throttle(10.0, f'{module}: not started on {self.cfg.authority} yet ({m.error}); '
+                                             f'trying again')
+                time.sleep(1.0)
+                _, m = self.run_migration(module, self.cfg.authority, 'cold')
             for other in self.cfg.hosts:
                 if module in self.cfg.hot_standby and other != self.books[module].host():
                     self._call(self.agents[other], 'start', module)
