@@ -79,17 +79,9 @@ class MasterClient:
         return snap
 
     def apply(self, unregister: List[sync.Registration], register: List[sync.Registration]) -> List[str]:
-        """Unregistrations then registrations in one batch; returns failures.
-
-        A subscriber proxy carries the remote node's real XML-RPC URI, so while it is registered this master
-        sends that node ``publisherUpdate`` calls, and rospy takes each as the complete list of publishers. A
-        proxy subscriber is therefore removed *before* the publishers of the same batch (else the master would
-        tell the remote node, perhaps only when a cut link returns, that a topic lost its publishers, and the
-        node would drop connections its own master still lists) and added *after* them (no partial lists)."""
+        """Unregistrations then registrations in one batch; returns failures."""
         if not unregister and not register:
             return []
-        unregister = sorted(unregister, key=lambda r: {'sub': 0, 'srv': 1, 'pub': 2}[r.kind])
-        register = sorted(register, key=lambda r: {'pub': 0, 'srv': 1, 'sub': 2}[r.kind])
         multi = xmlrpc.client.MultiCall(self._proxy())
         for r in unregister:
             if r.kind == 'pub':
