@@ -286,7 +286,9 @@ def test_a_goal_continues_through_a_migration_and_only_the_holder_drives(ros, wo
     assert_clean(b, 'B')
 
 
-def test_a_cut_off_instance_pauses_and_resumes_the_goal(world, instances):
+def test_a_cut_off_instance_pauses_and_resumes_and_a_frozen_one_takes_its_goal_back(world, instances):
+    """Lapse: no commands while the lease is not renewed, the goal resumes when it is. Rollback: a frozen
+    instance promoted again with its own state (a migration whose target failed) continues the goal."""
     from actionlib_msgs.msg import GoalStatus
     sim, rec, driver = world
     c = instances('robot')
@@ -296,26 +298,42 @@ def test_a_cut_off_instance_pauses_and_resumes_the_goal(world, instances):
     driver.wait_active(10, host='robot')
     wait_until(lambda: client.client.wait_for_server(rospy.Duration(0.5)), 30, 'the action server')
     x0 = rec.pose[0]
-    goal_x = 1.5 if x0 > 3.0 else 4.5
-    client.send(goal_x, 0.0)
+    goal_x = 1.0 if x0 > 3.0 else 5.0
+    goal_id = client.send(goal_x, 0.0)
     wait_until(lambda: abs(rec.pose[0] - x0) > 0.8, 120, 'the robot under way', c)
 
+    # ---- lapse
     driver.cut_off()                                            # renewals unanswered: the lease runs out
     driver.wait_role('promoted', 5, host='robot')
     t_lapse = time.monotonic()
     wait_until(rec.stopped, 20, 'the robot to stop while the lease lapsed')
     x_paused = rec.pose[0]
-    sim_time_passes(3.0)                                       # longer than controller_patience would allow
+    sim_time_passes(3.5)                                       # longer than controller_patience (3 s)
     assert not rec.cmds_from('move_base@robot', t_lapse + IN_FLIGHT), 'commands during the lapse'
     assert client.client.get_state() == GoalStatus.ACTIVE
     assert abs(rec.pose[0] - x_paused) < 0.01
-
     with driver.lock:
         driver.answering = True                                 # the link is back
     driver.wait_active(10, host='robot')
+    wait_until(lambda: abs(rec.pose[0] - x_paused) > 0.8, 120, 'the robot under way again', c)
+
+    # ---- frozen, then promoted again with its own state (rolled back)
+    state = driver.freeze(host='robot')
+    t_frozen = time.monotonic()
+    assert state['goal']['id'] == goal_id
+    wait_until(rec.stopped, 20, 'the robot to stop after the freeze')
+    assert not rec.cmds_from('move_base@robot', t_frozen + IN_FLIGHT), 'commands after the freeze'
+    assert not rec.statuses_between(t_frozen + IN_FLIGHT), 'status after the freeze'
+    t_promote = time.monotonic()
+    driver.promote(state, host='robot')
+    driver.wait_active(10, host='robot')
+
     wait_until(lambda: client.client.wait_for_result(rospy.Duration(0.2)), 180, 'the goal result', c)
+    t_result = time.monotonic()
     assert client.client.get_state() == GoalStatus.SUCCEEDED, client.client.get_goal_status_text()
     assert not client.bad_statuses(), client.transitions
     assert math.hypot(rec.pose[0] - goal_x, rec.pose[1]) <= 0.2
+    again = rec.statuses_between(t_promote, t_result)
+    assert again and again[0][1].get(goal_id) == GoalStatus.ACTIVE, again[:3]
     assert c.alive()
     assert_clean(c, 'C')
