@@ -56,14 +56,18 @@ class CostmapROS:
         params: the costmap's parameters (read by :func:`read_navigation_params`).
         tf: tf helper.
         active: returns False while move_base is idle with ``shutdown_costmaps`` set (updates pause).
+        publishing: returns False while the costmap must not be published (a migration standby: it updates
+            from the sensors but holds its output back); nothing is published before :meth:`open_publishers`.
     """
 
-    def __init__(self, params: CostmapParams, tf: TfHelper, active: Callable[[], bool] = lambda: True) -> None:
+    def __init__(self, params: CostmapParams, tf: TfHelper, active: Callable[[], bool] = lambda: True,
+                 publishing: Callable[[], bool] = lambda: True) -> None:
         self.params = params
         self.name = params.name
         self.ns = f'~{params.name}'
         self.tf = tf
         self.active = active
+        self.publishing = publishing
         self.lock = threading.RLock()
         self.costmap = LayeredCostmap(params.config, params.name)
         self.map_frame = 'map'
@@ -77,9 +81,9 @@ class CostmapROS:
         cfg = params.config
         self.footprint = params.footprint or circle_footprint(cfg.robot_radius)
 
-        self.costmap_pub = rospy.Publisher(f'{self.ns}/costmap', OccupancyGrid, queue_size=1, latch=True)
-        self.updates_pub = rospy.Publisher(f'{self.ns}/costmap_updates', OccupancyGridUpdate, queue_size=1)
-        self.footprint_pub = rospy.Publisher(f'{self.ns}/footprint', PolygonStamped, queue_size=1)
+        self.costmap_pub: Optional[rospy.Publisher] = None       # open_publishers()
+        self.updates_pub: Optional[rospy.Publisher] = None
+        self.footprint_pub: Optional[rospy.Publisher] = None
         self.map_sub = None
         if cfg.static_layer is not None:
             self.map_sub = rospy.Subscriber(params.map_topic, OccupancyGrid, self._on_map, queue_size=1)
@@ -101,6 +105,13 @@ class CostmapROS:
 
         self._thread = threading.Thread(target=self._update_loop, name=f'{self.name}_update', daemon=True)
         self._thread.start()
+
+    def open_publishers(self, publisher: Callable[..., rospy.Publisher] = rospy.Publisher) -> None:
+        """Create the output topics with ``publisher`` (rospy.Publisher, or a managed instance's factory that
+        marks the connections with the instance)."""
+        self.updates_pub = publisher(f'{self.ns}/costmap_updates', OccupancyGridUpdate, queue_size=1)
+        self.footprint_pub = publisher(f'{self.ns}/footprint', PolygonStamped, queue_size=1)
+        self.costmap_pub = publisher(f'{self.ns}/costmap', OccupancyGrid, queue_size=1, latch=True)
 
     # -- inputs -----------------------------------------------------------------------------------
     def _on_map(self, msg: OccupancyGrid) -> None:
@@ -212,7 +223,8 @@ class CostmapROS:
             try:
                 if self.active():
                     self.update()
-                    self._publish()
+                    if self.costmap_pub is not None and self.publishing():
+                        self._publish()
                 rospy.sleep(1.0 / freq if freq > 0 else 0.1)
             except rospy.ROSInterruptException:
                 return

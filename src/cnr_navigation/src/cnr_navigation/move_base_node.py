@@ -2,6 +2,11 @@
 
 Interface as move_base (navigation@noetic-devel ``move_base.cpp``); see the package README for
 the full list of topics, services and parameters.
+
+Movable by migration_manager (README "Migration state"): as a managed standby the costmaps follow the sensors
+but the node has no action server, no services and publishes nothing; on promotion the client's goal is taken
+over with its goal id (:mod:`cnr_navigation.action_server`) and continues; frozen, the node stops commanding at
+once and leaves the goal to the next instance without a terminal status.
 """
 from __future__ import annotations
 
@@ -9,13 +14,14 @@ import dataclasses
 import threading
 import time
 from collections import deque
-from typing import Deque, Dict, List, Optional
+from typing import Any, Deque, Dict, List, Optional, Tuple
 
-import actionlib
 import numpy as np
 import rospy
 import tf2_ros
+from actionlib_msgs.msg import GoalStatus
 from dynamic_reconfigure.server import Server as ReconfigureServer
+from dynamic_reconfigure.srv import Reconfigure as ReconfigureSrv
 from geometry_msgs.msg import PoseStamped, Twist
 from move_base_msgs.msg import (MoveBaseAction, MoveBaseActionGoal, MoveBaseFeedback, MoveBaseGoal,
                                 RecoveryStatus)
@@ -25,9 +31,11 @@ from std_srvs.srv import Empty, EmptyResponse
 
 import cnr_params
 from cnr_params.ros import init_node, quiet_at_shutdown
+from cnr_navigation.action_server import TakeoverActionServer
 from cnr_navigation.cfg import DWAPlannerConfig, MoveBaseConfig
 from cnr_navigation.core.dwa import DWAController
-from cnr_navigation.core.geometry import IDENTITY, Pose2D
+from cnr_navigation.core.geometry import IDENTITY, Pose2D, yaw_to_quaternion
+from cnr_navigation.core.migration import GoalRecord, HandOver, parse_state, target_yaw
 from cnr_navigation.core.move_base import MoveBaseCore, Velocity, goal_problem
 from cnr_navigation.core.param_reader import NavigationParams, dwa_config, move_base_config, read_navigation_params
 from cnr_navigation.core.param_tables import GLOBAL_PLANNERS, LOCAL_PLANNERS
@@ -35,6 +43,7 @@ from cnr_navigation.core.planner import GlobalPlanner, PlanningError, path_with_
 from cnr_navigation.core.recovery import ClearCostmapRecovery, Recovery, RotateRecovery
 from cnr_navigation.costmap_ros import CostmapROS
 from cnr_navigation.ros_io import RosParamReader, TfHelper, path_msg, pose_stamped, pose_to_2d
+from migration_manager.instance import Hooks, ManagedInstance
 
 
 class _RecoveryBackend:
@@ -59,14 +68,27 @@ class _RecoveryBackend:
         return self.node.local_costmap.in_collision(pose)
 
 
-class MoveBaseNode:
+class MoveBaseNode(Hooks):
     """The node: builds costmaps, planner, controller and the state machine, and serves the action."""
 
     def __init__(self, params: NavigationParams) -> None:
         self.params = params
         self.global_frame = params.global_frame
-        self.server = actionlib.SimpleActionServer('move_base', MoveBaseAction, execute_cb=self._execute,
-                                                   auto_start=False)
+        # migration (README "Migration state"); the managed instance is created last, once the node is complete
+        self.instance: Optional[ManagedInstance] = None
+        self.managed = bool(rospy.get_param('~migration/role', ''))   # ManagedInstance's rule, known early
+        self.output_lock = threading.RLock()     # outputs_open vs. each publication
+        self.outputs_open = False                # action server, services and topics open (active, not frozen)
+        self.open_lock = threading.Lock()        # opening vs. closing the outputs
+        self.handover: Optional[HandOver] = None             # set_state's goals, taken over when outputs open
+        self.takeover_recovery: Dict[str, Tuple[int, str]] = {}   # goal id -> recovery state handed over
+        # (goal id, target in the global frame, next recovery index, trigger) of the goal the state machine
+        # pursues; replaced whole, so get_state reads it without the state machine's lock
+        self.pursuit: Optional[Tuple[str, Pose2D, int, str]] = None
+        self.services: List[rospy.Service] = []
+        self.reconfigure_servers: List[ReconfigureServer] = []
+        self.ready = threading.Event()           # the node is complete (the instance may be promoted before)
+        self.server = TakeoverActionServer('move_base', MoveBaseAction, self._execute)
         self.tf_buffer = tf2_ros.Buffer()
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
         self.tf = TfHelper(self.tf_buffer)
@@ -75,31 +97,23 @@ class MoveBaseNode:
         self.control_times: Deque[float] = deque(maxlen=500)
         self.plan_times: Deque[float] = deque(maxlen=100)
 
-        self.cmd_pub = rospy.Publisher('cmd_vel', Twist, queue_size=1)
-        self.current_goal_pub = rospy.Publisher('~current_goal', PoseStamped, queue_size=1)
-        self.action_goal_pub = rospy.Publisher('move_base/goal', MoveBaseActionGoal, queue_size=1)
-        self.recovery_status_pub = rospy.Publisher('move_base/recovery_status', RecoveryStatus, queue_size=1)
         self.simple_goal_sub = rospy.Subscriber('move_base_simple/goal', PoseStamped, self._on_simple_goal,
                                                 queue_size=1)
         self.odom_sub = rospy.Subscriber(params.odom_topic, Odometry, self._on_odom, queue_size=1)
 
         # global costmap and planner (navfn's namespace)
-        self.global_costmap = CostmapROS(params.global_costmap, self.tf, self._costmaps_active)
+        self.global_costmap = CostmapROS(params.global_costmap, self.tf, self._costmaps_active, self._may_output)
+        self._reconfigure(*self.global_costmap.servers)
         self.planner = GlobalPlanner(params.planner)
-        self.plan_pub = rospy.Publisher('~NavfnROS/plan', Path, queue_size=1)
-        self.navfn_srv = rospy.Service('~NavfnROS/make_plan', GetPlan, self._navfn_make_plan)
 
         # local costmap and controller (DWAPlannerROS's namespace)
-        self.local_costmap = CostmapROS(params.local_costmap, self.tf, self._costmaps_active)
+        self.local_costmap = CostmapROS(params.local_costmap, self.tf, self._costmaps_active, self._may_output)
+        self._reconfigure(*self.local_costmap.servers)
         self.dwa = DWAController(params.dwa, params.move_base.controller_frequency)
         self.dwa_extra = dict(params.dwa_extra)
-        self.dwa_global_plan_pub = rospy.Publisher('~DWAPlannerROS/global_plan', Path, queue_size=1)
-        self.local_plan_pub = rospy.Publisher('~DWAPlannerROS/local_plan', Path, queue_size=1)
         self._dwa_defaults: Optional[Dict] = None
         self.dwa_server = ReconfigureServer(DWAPlannerConfig, self._on_dwa_cfg, '~DWAPlannerROS')
-
-        self.make_plan_srv = rospy.Service('~make_plan', GetPlan, self._make_plan_service)
-        self.clear_srv = rospy.Service('~clear_costmaps', Empty, self._clear_costmaps_service)
+        self._reconfigure(self.dwa_server)
 
         rb = _RecoveryBackend(self)
         recoveries: List[Recovery] = []
@@ -112,9 +126,25 @@ class MoveBaseNode:
 
         self._planner_thread = threading.Thread(target=self._planner_loop, name='planner', daemon=True)
         self._planner_thread.start()
-        self.server.start()
         self._mb_defaults: Optional[Dict] = None
         self.mb_server = ReconfigureServer(MoveBaseConfig, self._on_move_base_cfg)
+        self._reconfigure(self.mb_server)
+
+        # the managed instance last: a standby is announced (and may be promoted) once it is complete
+        self.instance = ManagedInstance('move_base', self)
+        pub = self.instance.publisher
+        self.cmd_pub = pub('cmd_vel', Twist, queue_size=1)
+        self.current_goal_pub = pub('~current_goal', PoseStamped, queue_size=1)
+        self.action_goal_pub = pub('move_base/goal', MoveBaseActionGoal, queue_size=1)
+        self.recovery_status_pub = pub('move_base/recovery_status', RecoveryStatus, queue_size=1)
+        self.plan_pub = pub('~NavfnROS/plan', Path, queue_size=1)
+        self.dwa_global_plan_pub = pub('~DWAPlannerROS/global_plan', Path, queue_size=1)
+        self.local_plan_pub = pub('~DWAPlannerROS/local_plan', Path, queue_size=1)
+        for cm in (self.global_costmap, self.local_costmap):
+            cm.open_publishers(pub)
+        self.ready.set()
+        if not self.instance.managed:
+            self._open_outputs()
 
     # ================================================================================================
     # NavigationBackend for the state machine
@@ -132,13 +162,13 @@ class MoveBaseNode:
         t0 = time.perf_counter()
         plan = self.planner.make_plan(self.global_costmap.planning_grid(), start, goal)
         self.plan_times.append(time.perf_counter() - t0)
-        self.plan_pub.publish(path_msg(plan, self.global_frame, rospy.Time.now()))
+        self._out(self.plan_pub, path_msg(plan, self.global_frame, rospy.Time.now()))
         return plan
 
     def set_plan(self, plan: np.ndarray) -> bool:
         with self.controller_lock:
             ok = self.dwa.set_plan(plan)
-        self.dwa_global_plan_pub.publish(path_msg(plan, self.global_frame, rospy.Time.now()))
+        self._out(self.dwa_global_plan_pub, path_msg(plan, self.global_frame, rospy.Time.now()))
         return ok
 
     def _global_to_local(self) -> Optional[Pose2D]:
@@ -156,7 +186,7 @@ class MoveBaseNode:
         with self.controller_lock, self.local_costmap.lock:
             result = self.dwa.compute_velocity(pose, self.velocity, self.local_costmap.costmap, g2l)
         stamp = rospy.Time.now()
-        self.local_plan_pub.publish(path_msg(result.trajectory, self.local_costmap.costmap.cfg.global_frame, stamp))
+        self._out(self.local_plan_pub, path_msg(result.trajectory, self.local_costmap.costmap.cfg.global_frame, stamp))
         if result.cmd is None:
             rospy.logwarn_throttle(2.0, 'DWA planner failed to produce path.')
         return result.cmd
@@ -171,6 +201,157 @@ class MoveBaseNode:
 
     def sensors_current(self) -> bool:
         return self.local_costmap.sensors_current()
+
+    # ================================================================================================
+    # outputs and migration (README "Migration state")
+
+    def _may_output(self) -> bool:
+        """Publish now? Only while the outputs are open and the lease is held (always, unmanaged)."""
+        return self.outputs_open and self.instance is not None and self.instance.active
+
+    def _out(self, publisher: rospy.Publisher, msg) -> None:
+        with self.output_lock:              # on_frozen closes under this lock: nothing goes out after it
+            if self._may_output():
+                publisher.publish(msg)
+
+    def _conclude(self, terminal, **kwargs) -> bool:
+        """Give the current goal a terminal status (``terminal`` is a SimpleActionServer setter), unless this
+        instance is frozen: its state, with the goal in it, was taken under the instance lock and the goal is
+        the next instance's to conclude. A lapsed lease does not hold the status back."""
+        with self.instance.lock:
+            if self.instance.frozen or not self.server.started:
+                return False
+            terminal(**kwargs)
+            return True
+
+    def _reconfigure(self, *servers: ReconfigureServer) -> None:
+        """Keep the dynamic_reconfigure servers; a standby closes their services until it is active."""
+        for server in servers:
+            self.reconfigure_servers.append(server)
+            if self.managed:
+                server.set_service.shutdown('standby')
+                server.set_service = None
+
+    def get_state(self) -> Dict[str, Any]:
+        return self._hand_over().to_dict()
+
+    def _hand_over(self) -> HandOver:
+        a = self.server.action_server
+        with a.lock, self.server.lock:
+            if self.handover is not None:                  # promoted, not opened yet: what it was given
+                return self.handover
+            current, pending = self.server.goal_snapshot()
+            pursuit = self.pursuit
+            goal = next_goal = None
+            if current is not None:
+                gid = current.get_goal_id()
+                if pursuit is not None and pursuit[0] == gid.id:
+                    _, target, index, trigger = pursuit
+                    goal = GoalRecord(gid.id, gid.stamp.secs, gid.stamp.nsecs, self.global_frame, target.x,
+                                      target.y, target.yaw, self._cancel_requested(current), index, trigger)
+                else:                                      # accepted, not started (or just finished) here
+                    goal = self._record(current, *self.takeover_recovery.get(gid.id, (0, 'PLANNING_R')))
+            if pending is not None:
+                next_goal = self._record(pending, 0, 'PLANNING_R')
+            return HandOver(goal, next_goal)
+
+    def _record(self, handle, recovery_index: int, recovery_trigger: str) -> GoalRecord:
+        """A goal as the client sent it (its own frame)."""
+        gid, target = handle.get_goal_id(), handle.get_goal().target_pose
+        p, q = target.pose.position, target.pose.orientation
+        return GoalRecord(gid.id, gid.stamp.secs, gid.stamp.nsecs, target.header.frame_id.lstrip('/') or
+                          self.global_frame, p.x, p.y, target_yaw((q.x, q.y, q.z, q.w)),
+                          self._cancel_requested(handle), recovery_index, recovery_trigger)
+
+    def _note_pursuit(self, goal_id: Optional[str]) -> None:
+        """Record the goal the state machine pursues (None: none) with its recovery state."""
+        goal = self.core.goal
+        if goal_id is None or goal is None:
+            self.pursuit = None
+            return
+        self.pursuit = (goal_id, goal, *self.core.recovery_state())
+
+    @staticmethod
+    def _cancel_requested(handle) -> bool:
+        return handle.get_goal_status().status in (GoalStatus.PREEMPTING, GoalStatus.RECALLING)
+
+    def set_state(self, state: Dict[str, Any]) -> None:
+        handover = parse_state(state, len(self.core.recoveries))
+        a = self.server.action_server
+        with a.lock, self.server.lock:
+            if self.outputs_open:
+                raise ValueError('move_base state: this instance is active; a state is taken over only on '
+                                 'promotion')
+            self.handover = handover
+        if not handover.empty:
+            rospy.loginfo(f'move_base: handed over: goal {handover.goal.id if handover.goal else None}, '
+                          f'next goal {handover.next_goal.id if handover.next_goal else None}')
+
+    @staticmethod
+    def _action_goal(record: GoalRecord) -> MoveBaseActionGoal:
+        msg = MoveBaseActionGoal()
+        msg.goal_id.id = record.id
+        msg.goal_id.stamp = rospy.Time(record.stamp_secs, record.stamp_nsecs)
+        msg.header.stamp = msg.goal_id.stamp
+        target = msg.goal.target_pose
+        target.header.frame_id = record.frame
+        target.header.stamp = msg.goal_id.stamp
+        target.pose.position.x, target.pose.position.y = record.x, record.y
+        target.pose.orientation.x, target.pose.orientation.y, target.pose.orientation.z, \
+            target.pose.orientation.w = yaw_to_quaternion(record.yaw)
+        return msg
+
+    def on_active(self) -> None:
+        if not self.outputs_open:
+            threading.Thread(target=self._open_outputs, name='open_outputs', daemon=True).start()
+
+    def _open_outputs(self) -> None:
+        """Action server (taking over the handed-over goals first), services, reconfigure services."""
+        self.ready.wait()
+        with self.open_lock:
+            if self.outputs_open or self.instance.frozen or rospy.core.is_shutdown_requested():
+                return
+            with self.output_lock:
+                self.outputs_open = True
+            a = self.server.action_server
+            with a.lock, self.server.lock:
+                handover, self.handover = self.handover or HandOver(), None
+                goals: List[Tuple[MoveBaseActionGoal, str, bool]] = []
+                if handover.goal is not None:
+                    g = handover.goal
+                    self.takeover_recovery[g.id] = (g.recovery_index, g.recovery_trigger)
+                    goals.append((self._action_goal(g), 'active', g.cancel_requested))
+                if handover.next_goal is not None:
+                    goals.append((self._action_goal(handover.next_goal), 'pending',
+                                  handover.next_goal.cancel_requested))
+                self.server.start_with(goals)
+            self.services = [rospy.Service('~make_plan', GetPlan, self._make_plan_service),
+                             rospy.Service('~NavfnROS/make_plan', GetPlan, self._navfn_make_plan),
+                             rospy.Service('~clear_costmaps', Empty, self._clear_costmaps_service)]
+            for server in self.reconfigure_servers:
+                if server.set_service is None:
+                    server.set_service = rospy.Service(server.ns + 'set_parameters', ReconfigureSrv,
+                                                       server._set_callback)
+        if self.instance.managed:
+            rospy.loginfo(f'move_base: active{f" with goal {handover.goal.id}" if handover.goal else ""}')
+
+    def on_frozen(self) -> None:
+        """Outputs closed for good: no velocity command from now on (not even a zero one: the next instance
+        commands), no status for the goal (it continues in the next instance), no services."""
+        with self.output_lock:
+            self.outputs_open = False
+        with self.open_lock:
+            self.server.release()
+            self.core.reset()
+            self.pursuit = None
+            self.handover = None
+            for srv in self.services:
+                srv.shutdown('frozen for a migration')
+            self.services = []
+            for server in self.reconfigure_servers:
+                if server.set_service is not None:
+                    server.set_service.shutdown('frozen for a migration')
+                    server.set_service = None
 
     # ================================================================================================
     # callbacks
@@ -191,15 +372,15 @@ class MoveBaseNode:
         goal = MoveBaseActionGoal()
         goal.header.stamp = rospy.Time.now()
         goal.goal.target_pose = msg
-        self.action_goal_pub.publish(goal)
+        self._out(self.action_goal_pub, goal)
 
     def publish_zero(self) -> None:
-        self.cmd_pub.publish(Twist())
+        self._out(self.cmd_pub, Twist())
 
     def _publish_cmd(self, cmd: Velocity) -> None:
         msg = Twist()
         msg.linear.x, msg.angular.z = cmd
-        self.cmd_pub.publish(msg)
+        self._out(self.cmd_pub, msg)
 
     def _to_global(self, target: PoseStamped) -> Optional[PoseStamped]:
         """``goalToGlobalFrame``: the pose in the global frame (latest transform), None if tf has none."""
@@ -215,82 +396,141 @@ class MoveBaseNode:
 
     def _start_goal(self, target: PoseStamped) -> bool:
         """Validate and start a goal; abort it (and return False) if it is unusable."""
+        goal_id = self.server.current_goal.get_goal_id().id
+        takeover = self.takeover_recovery.pop(goal_id, None)
         p, q = target.pose.position, target.pose.orientation
         problem = goal_problem(p.x, p.y, p.z, (q.x, q.y, q.z, q.w))
         if problem is not None:
             rospy.logwarn(f'{problem[0]}: {problem[1]}')
             self.core.reset()
-            self.server.set_aborted(text=problem[0])
+            self._conclude(self.server.set_aborted, text=problem[0])
             return False
         goal = self._to_global(target)
         if goal is None:
             self.core.reset()
-            self.server.set_aborted(text=f'Failed to transform the goal pose from {target.header.frame_id} into '
-                                         f'the {self.global_frame} frame')
+            self._conclude(self.server.set_aborted, text=f'Failed to transform the goal pose from '
+                                                         f'{target.header.frame_id} into the {self.global_frame} frame')
             return False
         p, q = goal.pose.position, goal.pose.orientation
         outcome = self.core.new_goal(p.x, p.y, (q.x, q.y, q.z, q.w), rospy.get_time(), z=p.z)
+        if outcome is None and takeover is not None:
+            self.core.restore_recovery(*takeover)
+        self._note_pursuit(goal_id if outcome is None else None)
         if outcome is not None:
-            self.server.set_aborted(text=outcome.text)
+            self._conclude(self.server.set_aborted, text=outcome.text)
             return False
         with self.controller_lock:
             self.dwa.reset()
         goal.header.frame_id = self.global_frame
-        self.current_goal_pub.publish(goal)
-        rospy.loginfo(f'move_base: new goal ({p.x:.2f}, {p.y:.2f}) in {self.global_frame}')
+        self._out(self.current_goal_pub, goal)
+        if takeover is None:
+            rospy.loginfo(f'move_base: new goal ({p.x:.2f}, {p.y:.2f}) in {self.global_frame}')
+        else:
+            rospy.loginfo(f'move_base: continuing goal {goal_id} ({p.x:.2f}, {p.y:.2f}) in {self.global_frame}, '
+                          f'taken over from the previous instance (next recovery {takeover[0]}, {takeover[1]})')
         return True
+
+    def _handed_over(self) -> bool:
+        """Frozen (or superseded): the goal belongs to the next instance."""
+        return self.instance is not None and (self.instance.frozen or not self.outputs_open)
+
+    def _leave_goal(self) -> None:
+        """End the execute callback of a frozen instance without a terminal status: wait until on_frozen has
+        released the server's goal (else actionlib would abort a goal left active)."""
+        while self.server.is_active() and not rospy.core.is_shutdown_requested():
+            time.sleep(0.01)
 
     @quiet_at_shutdown
     def _execute(self, goal: MoveBaseGoal) -> None:
         """The action's execute callback: ``MoveBase::executeCb``."""
+        try:
+            self._run_goal(goal)
+        finally:
+            if self._handed_over():    # actionlib aborts a goal left active: return once it is released
+                self._leave_goal()
+
+    def _run_goal(self, goal: MoveBaseGoal) -> None:
         if not self._start_goal(goal.target_pose):
             return
         frequency = self.core.cfg.controller_frequency
         rate = rospy.Rate(frequency)
+        paused = False
         while not rospy.is_shutdown():
+            if self._handed_over():
+                return
             if self.core.cfg.controller_frequency != frequency:
                 frequency = self.core.cfg.controller_frequency
                 rate = rospy.Rate(frequency)
             if self.server.is_preempt_requested():
                 if self.server.is_new_goal_available():
-                    if not self._start_goal(self.server.accept_new_goal().target_pose):
+                    with self.instance.lock:           # accepting publishes: not once the state was taken
+                        new_goal = None if self.instance.frozen else self.server.accept_new_goal()
+                    if new_goal is None:
+                        continue
+                    if not self._start_goal(new_goal.target_pose):
                         self.publish_zero()
                         return
                 else:
                     self.core.reset()
                     self.publish_zero()
-                    self.server.set_preempted()
-                    return
+                    if self._conclude(self.server.set_preempted):
+                        return
+                    continue
+            if not self.instance.active:               # the lease lapsed: no output until it is renewed
+                if not paused:
+                    paused = True
+                    rospy.logwarn('move_base: lease lapsed, control paused (no velocity commands)')
+                self._sleep(rate)
+                continue
+            if paused:
+                paused = False
+                self.core.resume(rospy.get_time())
+                rospy.loginfo('move_base: lease renewed, control resumed')
             start_wall = time.perf_counter()
             result = self.core.cycle(rospy.get_time())
             elapsed = time.perf_counter() - start_wall
             self.control_times.append(elapsed)
             if result.pose is not None:
-                self.server.publish_feedback(MoveBaseFeedback(
-                    base_position=pose_stamped(result.pose, self.global_frame, rospy.Time.now())))
+                feedback = MoveBaseFeedback(base_position=pose_stamped(result.pose, self.global_frame,
+                                                                       rospy.Time.now()))
+                with self.output_lock:
+                    if self._may_output():
+                        self.server.publish_feedback(feedback)
             if result.recovery is not None:
                 self._publish_recovery_status(result)
+            if result.outcome is None and self.pursuit is not None:
+                self._note_pursuit(self.pursuit[0])
             if result.cmd is not None:
                 self._publish_cmd(result.cmd)
             if result.outcome is not None:
                 self.publish_zero()
-                if result.outcome.status == 'SUCCEEDED':
-                    self.server.set_succeeded(text=result.outcome.text)
-                else:
-                    self.server.set_aborted(text=result.outcome.text)
-                return
+                conclude = self.server.set_succeeded if result.outcome.status == 'SUCCEEDED' else \
+                    self.server.set_aborted
+                if self._conclude(conclude, text=result.outcome.text):
+                    return
+                continue                               # frozen meanwhile: the next instance concludes it
             if elapsed > 1.0 / frequency:
                 rospy.logwarn_throttle(5.0, f'Control loop missed its desired rate of {frequency:.4f}Hz... the loop '
                                             f'actually took {elapsed:.4f} seconds')
-            try:
-                rate.sleep()
-            except rospy.exceptions.ROSTimeMovedBackwardsException:
-                pass
-            except rospy.ROSInterruptException:
+            if not self._sleep(rate):
                 break
         if self.server.is_active():
             self.core.reset()
-            self.server.set_aborted(text='Aborting on the goal because the node has been killed')
+            if self.instance.managed:                  # the goal may continue in another instance
+                self.server.release()
+            else:
+                self.server.set_aborted(text='Aborting on the goal because the node has been killed')
+
+    @staticmethod
+    def _sleep(rate: rospy.Rate) -> bool:
+        """One control period; False when the node is shutting down."""
+        try:
+            rate.sleep()
+        except rospy.exceptions.ROSTimeMovedBackwardsException:
+            pass
+        except rospy.ROSInterruptException:
+            return False
+        return True
 
     def _publish_recovery_status(self, result) -> None:
         index, total, name = result.recovery
@@ -299,14 +539,14 @@ class MoveBaseNode:
         msg.current_recovery_number = index
         msg.total_number_of_recoveries = total
         msg.recovery_behavior_name = name
-        self.recovery_status_pub.publish(msg)
+        self._out(self.recovery_status_pub, msg)
 
     def _planner_loop(self) -> None:
         """``MoveBase::planThread``: plan whenever the state machine wants a plan."""
         while not rospy.is_shutdown():
             try:
                 now = rospy.get_time()
-                if self.core.planner_due(now):
+                if self.core.planner_due(now) and self.instance is not None and self.instance.active:
                     self.core.run_planner(now, clock=rospy.get_time)
                 else:
                     time.sleep(0.02)

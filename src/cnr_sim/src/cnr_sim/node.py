@@ -1,7 +1,8 @@
 """The ``simulator`` node: ROS I/O around :class:`cnr_sim.core.world.World` (a stage_ros look-alike).
 
 Publishes /clock, odom, base_pose_ground_truth, scan, camera/depth/points, battery_state, obstacles,
-collision events and tf; subscribes mobile_base/commands/velocity; services reset_positions and teleport.
+collision events and tf; subscribes mobile_base/commands/velocity (fenced: a managed move_base instance
+that does not hold the lease is ignored, see :mod:`cnr_sim.core.fence`); services reset_positions and teleport.
 Every topic, service and parameter is documented in the package README.
 """
 from __future__ import annotations
@@ -26,13 +27,17 @@ from std_srvs.srv import Empty, EmptyResponse
 import cnr_params
 from cnr_maps.mapio import load_map
 from cnr_maps.pose import Pose2D, yaw_to_quaternion
-from cnr_msgs.msg import BatteryEnergy, Collision
+from cnr_msgs.msg import BatteryEnergy, Collision, MigrationLease
 from cnr_msgs.srv import Teleport, TeleportResponse
 from cnr_params.ros import init_node, private_section
 from cnr_sim.core.battery import BatteryModel, NetMeter, cpu_meter
 from cnr_sim.core.depth_camera import POINT_STEP
+from cnr_sim.core.fence import CommandFence
 from cnr_sim.core.world import World
 from cnr_sim.params import SimulatorParams, read_params
+from migration_manager.core.lease import Answer
+
+FENCED_MODULE = 'move_base'     # the managed module that commands the base (migration_manager)
 
 
 def yaw_quaternion(yaw: float) -> Quaternion:
@@ -129,6 +134,8 @@ class SimulatorNode:
         self.obstacles_pub = rospy.Publisher('obstacles', PoseArray, queue_size=2)
         self.tf = tf2_ros.TransformBroadcaster()
         self.static_tf = tf2_ros.StaticTransformBroadcaster()
+        self.fence = CommandFence(FENCED_MODULE)
+        rospy.Subscriber(f'/migration/{FENCED_MODULE}/lease', MigrationLease, self._on_lease, queue_size=20)
         rospy.Subscriber('mobile_base/commands/velocity', Twist, self._on_cmd, queue_size=5)
         rospy.Service('reset_positions', Empty, self._on_reset)
         rospy.Service('teleport', Teleport, self._on_teleport)
@@ -141,7 +148,20 @@ class SimulatorNode:
         self.rtf_achieved = 0.0
 
     # -- callbacks -----------------------------------------------------------------------------
+    def _on_lease(self, msg: MigrationLease) -> None:
+        with self.lock:
+            self.fence.on_lease(Answer(msg.module, msg.term, msg.holder, msg.nonce, msg.granted, msg.duration))
+
     def _on_cmd(self, msg: Twist) -> None:
+        header = getattr(msg, '_connection_header', None)
+        with self.lock:
+            accepted = self.fence.accept(header)
+            holder = self.fence.holder()
+        if not accepted:
+            rospy.logwarn_throttle(5.0, f'ignored velocity commands from {CommandFence.instance_of(header)}: '
+                                        f'{FENCED_MODULE} is held by {holder or "no instance"} '
+                                        f'({self.fence.dropped} dropped so far)')
+            return
         v, w = msg.linear.x, msg.angular.z
         if not (math.isfinite(v) and math.isfinite(w)):
             rospy.logwarn_throttle(5.0, f'rejected velocity command with non-finite values ({v}, {w})')

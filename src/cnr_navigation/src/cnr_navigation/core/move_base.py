@@ -222,6 +222,34 @@ class MoveBaseCore:
             self.t = _Timers(last_valid_plan=now, last_valid_control=now, last_oscillation_reset=now)
         return None
 
+    # -- migration (the goal continues in another instance; core/migration.py) ------------------------
+    def recovery_state(self) -> Tuple[int, str]:
+        """(next recovery index, trigger name): where the recovery sequence of the current goal stands."""
+        with self.lock:
+            return self.recovery_index, self.recovery_trigger.name
+
+    def restore_recovery(self, index: int, trigger: str) -> None:
+        """Continue the recovery sequence of a goal taken over from another instance (call after
+        :meth:`new_goal`). ValueError if ``index`` is beyond this instance's recoveries or ``trigger`` unknown."""
+        if not 0 <= index <= len(self.recoveries):
+            raise ValueError(f'recovery_index {index} is outside 0..{len(self.recoveries)}')
+        if trigger not in RecoveryTrigger.__members__:
+            raise ValueError(f'unknown recovery trigger {trigger!r}')
+        with self.lock:
+            self.recovery_index = index
+            self.recovery_trigger = RecoveryTrigger[trigger]
+
+    def resume(self, now: float) -> None:
+        """The control loop was paused (outputs closed while the lease lapsed) and runs again at ``now`` [s]:
+        the patience and oscillation timers restart, so the pause itself triggers no recovery."""
+        with self.lock:
+            if self.goal is None:
+                return
+            self.t.last_valid_plan = self.t.last_valid_control = self.t.last_oscillation_reset = now
+            self.oscillation_pose = None
+            if self.state == NavState.CONTROLLING:
+                self.run_planner_flag = True        # the robot may have drifted: plan again from where it is
+
     # -- planner side (planThread) ----------------------------------------------------------------------
     def planner_due(self, now: float) -> bool:
         with self.lock:

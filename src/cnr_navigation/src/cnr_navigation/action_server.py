@@ -1,0 +1,102 @@
+"""move_base's action server: actionlib's SimpleActionServer that can take over goals another instance accepted.
+
+A migrated move_base must continue the client's goal under the *same* goal id: actionlib's ActionClient marks
+its goal LOST as soon as a status array arrives without it (``CommStateMachine.update_status``), and calls a
+status of PENDING after ACTIVE an invalid transition. :meth:`TakeoverActionServer.start_with` therefore starts
+the server with the handed-over goals already in its status list, in the status the client last saw (ACTIVE,
+or PREEMPTING if a cancel was requested), before the first status array is published, and the execute thread
+runs such a goal without accepting it a second time. :meth:`TakeoverActionServer.release` closes the server
+for good (frozen for a migration): no terminal status for the goal, which belongs to the next instance now.
+
+Lock order as actionlib: ``action_server.lock`` before ``self.lock``.
+"""
+from __future__ import annotations
+
+from typing import Optional, Sequence, Tuple
+
+import actionlib
+import rospy
+from actionlib.server_goal_handle import ServerGoalHandle
+from actionlib_msgs.msg import GoalID, GoalStatus
+
+TAKEN_OVER = 'This goal was taken over from the previous move_base instance'
+
+
+class TakeoverActionServer(actionlib.SimpleActionServer):
+    """SimpleActionServer (never auto-started) with :meth:`start_with` and :meth:`release`."""
+
+    def __init__(self, name: str, action_spec, execute_cb) -> None:
+        self._adopted: Optional[ServerGoalHandle] = None
+        super().__init__(name, action_spec, execute_cb=execute_cb, auto_start=False)
+
+    @property
+    def started(self) -> bool:
+        return bool(self.action_server.started)
+
+    def start_with(self, goals: Sequence[Tuple[object, str, bool]] = ()) -> None:
+        """Start the server (as ``start()``) with goals taken over.
+
+        Args:
+            goals: ``(action_goal, status, cancel_requested)``, oldest first; ``action_goal`` is the action's
+                ActionGoal message with the client's goal id, ``status`` 'active' (the goal being pursued: it
+                is ACTIVE, or PREEMPTING if cancelled, in the first status array, and the execute callback runs
+                it) or 'pending' (received, not accepted yet: PENDING, or RECALLING if cancelled; accepted as
+                any new goal). A pending goal after an active one preempts it, as it would have in the
+                instance that received it.
+        """
+        a = self.action_server
+        with a.lock, self.lock:
+            if a.started:
+                return
+            a.initialize()          # publishers, subscribers, status timer: nothing is published before
+            a.started = True        # the publish_status() below
+            for action_goal, status, cancel in goals:
+                a.internal_goal_callback(action_goal)
+                handle = self.next_goal
+                if not (self.new_goal and handle.get_goal() and
+                        handle.get_goal_id().id == action_goal.goal_id.id):
+                    rospy.logwarn(f'move_base: goal {action_goal.goal_id.id} could not be taken over')
+                    continue
+                if status == 'active':
+                    tracker = handle.status_tracker
+                    tracker.status.status = GoalStatus.PREEMPTING if cancel else GoalStatus.ACTIVE
+                    tracker.status.text = TAKEN_OVER
+                    self.new_goal_preempt_request = cancel
+                    self._adopted = handle
+                elif cancel:
+                    a.internal_cancel_callback(GoalID(id=action_goal.goal_id.id))
+            a.publish_status()
+
+    def accept_new_goal(self):
+        """As actionlib's, except for a goal taken over: it is already ACTIVE (or PREEMPTING) at the client."""
+        with self.action_server.lock, self.lock:
+            adopted, self._adopted = self._adopted, None
+            if adopted is None or not self.new_goal or self.next_goal is not adopted:
+                return super().accept_new_goal()
+            self.current_goal = self.next_goal
+            self.new_goal = False
+            self.preempt_request = self.new_goal_preempt_request
+            self.new_goal_preempt_request = False
+            return self.current_goal.get_goal()
+
+    def release(self) -> None:
+        """Close the server and forget its goals without a terminal status (handed over to another instance):
+        no more goals, cancels, status, feedback or results. :meth:`start_with` may open it again."""
+        a = self.action_server
+        with a.lock, self.lock:
+            if a.started:
+                a.stop()
+            a.status_list = []
+            self.current_goal = ServerGoalHandle()
+            self.next_goal = ServerGoalHandle()
+            self.new_goal = self.preempt_request = self.new_goal_preempt_request = False
+            self._adopted = None
+
+    def goal_snapshot(self) -> Tuple[Optional[ServerGoalHandle], Optional[ServerGoalHandle]]:
+        """(the goal being pursued, a newer goal not accepted yet), each None if there is none. Call with
+        ``action_server.lock`` and ``self.lock`` held for a consistent pair."""
+        current = self.current_goal if self.is_active() else None
+        pending = self.next_goal if self.new_goal and self.next_goal.get_goal() else None
+        if self._adopted is not None and pending is self._adopted:
+            current, pending = pending, None          # taken over, the execute thread has not run it yet
+        return current, pending

@@ -1,0 +1,339 @@
+"""move_base migrated while it drives the robot to a goal, on one real master with the simulator: the client's
+goal continues under the same goal id in the new instance and ends SUCCEEDED, never LOST, ABORTED or PREEMPTED;
+a standby has no action server and publishes nothing; a frozen instance stops commanding at once and sends no
+terminal status; a cut-off instance pauses and resumes; the simulator obeys only the lease holder.
+
+The test plays the migration manager (tests/migration_driver.py: one grantor for both hosts). On one master two
+nodes cannot share the name ``/move_base``, so the instance of host ``robot`` is frozen and stopped before the
+one of host ``cloud`` starts: the measured gap includes that start-up, which a real cold migration (the standby
+starts before the freeze, on the other master) or a hot standby does not have; the hand-over proper is printed
+too (promotion -> first velocity command of the new instance).
+"""
+import math
+import sys
+import threading
+import time
+
+import pytest
+
+from cnr_harness import wait_until
+
+rospy = pytest.importorskip('rospy')
+
+START_X = 0.5                 # robot.launch's start pose (0.5, 0, 0)
+RTF = '2.0'
+IN_FLIGHT = 0.5               # [s wall] a message published before a freeze may still be on its way
+
+
+# a publisher of velocity commands marked as a managed instance (argv[1]): 2 s of sim time at 10 Hz, turning
+FAKE_INSTANCE = """
+import sys, time, rospy
+from geometry_msgs.msg import Twist
+rospy.init_node('fake_instance', anonymous=True)
+pub = rospy.Publisher('/mobile_base/commands/velocity', Twist, queue_size=10, headers={'cnr_instance': sys.argv[1]})
+deadline = time.monotonic() + 30
+while pub.get_num_connections() < 2:          # the simulator and the test's recorder
+    assert time.monotonic() < deadline, 'no subscribers'
+    time.sleep(0.05)
+rate, cmd = rospy.Rate(10), Twist()
+cmd.angular.z = 0.8
+for _ in range(20):
+    pub.publish(cmd)
+    rate.sleep()
+"""
+
+
+class Recorder:
+    """What the test sees on the wire: velocity commands (with their publisher's instance), status arrays,
+    the robot's true pose, and an action client's transitions and feedback."""
+
+    def __init__(self) -> None:
+        from actionlib_msgs.msg import GoalStatusArray
+        from geometry_msgs.msg import Twist
+        from nav_msgs.msg import Odometry
+        self.lock = threading.Lock()
+        self.cmds = []            # (wall, instance or None, v, w)
+        self.statuses = []        # (wall, {goal id: status})
+        self.pose = None          # (x, y, yaw, v, w)
+        self.subs = [rospy.Subscriber('mobile_base/commands/velocity', Twist, self._on_cmd, queue_size=100),
+                     rospy.Subscriber('move_base/status', GoalStatusArray, self._on_status, queue_size=100),
+                     rospy.Subscriber('base_pose_ground_truth', Odometry, self._on_pose, queue_size=1)]
+
+    def _on_cmd(self, msg) -> None:
+        with self.lock:
+            self.cmds.append((time.monotonic(), msg._connection_header.get('cnr_instance'), msg.linear.x,
+                              msg.angular.z))
+
+    def _on_status(self, msg) -> None:
+        with self.lock:
+            self.statuses.append((time.monotonic(), {s.goal_id.id: s.status for s in msg.status_list}))
+
+    def _on_pose(self, msg) -> None:
+        q = msg.pose.pose.orientation
+        self.pose = (msg.pose.pose.position.x, msg.pose.pose.position.y, 2.0 * math.atan2(q.z, q.w),
+                     msg.twist.twist.linear.x, msg.twist.twist.angular.z)
+
+    def cmds_from(self, instance, after=0.0, before=math.inf):
+        with self.lock:
+            return [c for c in self.cmds if c[1] == instance and after <= c[0] < before]
+
+    def statuses_between(self, after, before=math.inf):
+        with self.lock:
+            return [s for s in self.statuses if after <= s[0] < before]
+
+    def stopped(self) -> bool:
+        return self.pose is not None and abs(self.pose[3]) < 1e-3 and abs(self.pose[4]) < 1e-3
+
+    def close(self) -> None:
+        for s in self.subs:
+            s.unregister()
+
+
+class Client:
+    """actionlib's SimpleActionClient (as mfg uses it), recording every transition of its goal."""
+
+    def __init__(self) -> None:
+        import actionlib
+        from move_base_msgs.msg import MoveBaseAction
+        self.client = actionlib.SimpleActionClient('move_base', MoveBaseAction)
+        self.transitions = []     # (wall, comm state, goal status)
+        self.feedback = []        # wall times
+        handle_transition, handle_feedback = self.client._handle_transition, self.client._handle_feedback
+
+        def on_transition(gh):
+            self.transitions.append((time.monotonic(), gh.get_comm_state(), gh.get_goal_status()))
+            handle_transition(gh)
+
+        def on_feedback(gh, feedback):
+            self.feedback.append(time.monotonic())
+            handle_feedback(gh, feedback)
+        self.client._handle_transition, self.client._handle_feedback = on_transition, on_feedback
+
+    def send(self, x, y, yaw=0.0):
+        from move_base_msgs.msg import MoveBaseGoal
+        g = MoveBaseGoal()
+        g.target_pose.header.frame_id = 'map'
+        g.target_pose.header.stamp = rospy.Time.now()
+        g.target_pose.pose.position.x, g.target_pose.pose.position.y = x, y
+        g.target_pose.pose.orientation.z, g.target_pose.pose.orientation.w = math.sin(yaw / 2), math.cos(yaw / 2)
+        self.client.send_goal(g)
+        return self.client.gh.comm_state_machine.action_goal.goal_id.id
+
+    def bad_statuses(self):
+        from actionlib_msgs.msg import GoalStatus
+        bad = {GoalStatus.LOST, GoalStatus.ABORTED, GoalStatus.PREEMPTED, GoalStatus.RECALLED, GoalStatus.REJECTED}
+        return [t for t in self.transitions if t[2] in bad]
+
+
+@pytest.fixture(scope='module')
+def world(ros):
+    """The simulator and map_server (no move_base), the recorder, one grantor for move_base on both hosts."""
+    from migration_driver import LeaseDriver
+    sim = ros.master.roslaunch('cnr_bringup', 'robot.launch', 'navigation:=false', f'real_time_factor:={RTF}')
+    rec = Recorder()
+    driver = LeaseDriver('move_base', hosts=('robot', 'cloud'))
+
+    def up():
+        assert sim.alive(), sim.output()[-3000:]
+        return rec.pose is not None
+    wait_until(up, 60, 'the simulator')
+    yield sim, rec, driver
+    driver.close()
+    rec.close()
+    ros.master.stop_child(sim)
+
+
+@pytest.fixture
+def instances(ros):
+    """Starts move_base instances (managed standbys); stops whatever is left at the end."""
+    started = []
+
+    def start(host):
+        proc = ros.master.roslaunch('cnr_navigation', 'move_base.launch', '--screen', 'migration_role:=standby',
+                                    f'migration_host:={host}')
+        started.append(proc)
+        return proc
+    yield start
+    for proc in started:
+        ros.master.stop_child(proc)
+
+
+def action_server_up() -> bool:
+    """Does any node publish move_base's action status (an action server exists)?"""
+    import rosgraph
+    pubs = dict(rosgraph.Master('/pytest').getSystemState()[0])
+    return bool(pubs.get('/move_base/status'))
+
+
+def services():
+    """move_base's services (not the introspection services every rospy node has, nor tf2's of its buffer)."""
+    import rosgraph
+    return {name for name, _ in rosgraph.Master('/pytest').getSystemState()[2]
+            if name.startswith('/move_base/') and not name.endswith(('/get_loggers', '/set_logger_level',
+                                                                     '/tf2_frames'))}
+
+
+def sim_time_passes(seconds: float, timeout: float = 30.0) -> None:
+    """An observation window of ``seconds`` of sim time (for checks that something does NOT happen)."""
+    end = rospy.get_time() + seconds
+    wait_until(lambda: rospy.get_time() >= end, timeout, f'{seconds} s of sim time')
+
+
+def assert_clean(proc, name):
+    """No traceback, no abort at shutdown and no complaint of actionlib's server in an instance's output."""
+    out = proc.output()
+    for bad in ('Traceback', 'Aborting on the goal', 'did not set the goal to a terminal status',
+                'Should never reach this code', 'could not be taken over'):
+        assert bad not in out, f'{name}: {bad!r} in its output:\n{out[-4000:]}'
+
+
+def test_a_goal_continues_through_a_migration_and_only_the_holder_drives(ros, world, instances):
+    from actionlib_msgs.msg import GoalStatus
+    from migration_manager.core import state as codec
+    sim, rec, driver = world
+    goal_x, goal_y = 5.0, 0.0
+
+    # ---- A (host robot) as a standby: inputs only; no action server, no services, no commands
+    a = instances('robot')
+    driver.wait_standby(90, host='robot')
+    client = Client()
+    from geometry_msgs.msg import PoseStamped
+    simple = rospy.Publisher('move_base_simple/goal', PoseStamped, queue_size=1, latch=True)
+    target = PoseStamped()
+    target.header.frame_id = 'map'
+    target.pose.position.x, target.pose.orientation.w = 3.0, 1.0
+    simple.publish(target)                                  # a standby must not act on it
+    t0 = time.monotonic()
+    sim_time_passes(3.0)
+    assert not action_server_up() and not services(), services()
+    assert not client.client.wait_for_server(rospy.Duration(0.5))
+    assert not rec.cmds_from('move_base@robot', t0) and rec.stopped()
+    simple.unregister()
+
+    # ---- promoted: the action server and the services appear
+    driver.promote(host='robot')
+    driver.wait_active(10, host='robot')
+    wait_until(lambda: client.client.wait_for_server(rospy.Duration(0.5)), 30, 'the action server of A')
+    wait_until(lambda: {'/move_base/make_plan', '/move_base/clear_costmaps', '/move_base/set_parameters'} <=
+               services(), 10, 'the services of A')
+    goal_id = client.send(goal_x, goal_y)
+
+    # ---- mid-way: freeze A; it stops commanding at once, without a terminal status
+    wait_until(lambda: rec.pose[0] > START_X + 0.45 * (goal_x - START_X), 120, 'the robot half-way', a)
+    assert rec.cmds_from('move_base@robot'), 'A never commanded'
+    assert client.client.get_state() == GoalStatus.ACTIVE
+    state = driver.freeze(host='robot')
+    t_frozen = time.monotonic()
+    g = state['goal']
+    assert g['id'] == goal_id and g['frame'] == 'map' and state['next_goal'] is None, state
+    assert (g['x'], g['y']) == pytest.approx((goal_x, goal_y), abs=1e-6)
+    wait_until(rec.stopped, 20, 'the robot to stop (the base watchdog: nobody commands)')
+    assert not rec.cmds_from('move_base@robot', t_frozen + IN_FLIGHT), 'A commanded after its freeze'
+    last_a = rec.cmds_from('move_base@robot')[-1][0]
+    assert client.client.get_state() == GoalStatus.ACTIVE
+
+    # ---- A stopped (its process ends without aborting the goal); B (host cloud) starts as a standby
+    a.stop()
+    assert_clean(a, 'A')
+    t_b_start = time.monotonic()
+    b = instances('cloud')
+    driver.wait_standby(90, host='cloud')
+    t_b_standby = time.monotonic()
+    assert not action_server_up() and not services()
+    assert not [s for s in rec.statuses_between(t_frozen + IN_FLIGHT)], 'status after the freeze, before B'
+    assert client.client.get_state() == GoalStatus.ACTIVE and not client.bad_statuses()
+
+    # a state that does not fit is refused, naming the field (and B stays a standby)
+    bad = dict(state, goal=dict(g, id=7))
+    res = driver.controls['cloud']('promote', 1000, codec.encode('move_base', bad))
+    assert not res.ok and 'goal.id' in res.message, res
+    driver.wait_role('standby', 5, host='cloud')
+
+    # ---- B promoted with A's state: it takes the goal over (same id) and drives to the goal
+    t_promote = time.monotonic()
+    driver.promote(state, host='cloud')
+    driver.wait_active(10, host='cloud')
+    wait_until(lambda: rec.cmds_from('move_base@cloud'), 60, 'the first command of B', b)
+    first_b = rec.cmds_from('move_base@cloud')[0][0]
+    wait_until(lambda: client.client.wait_for_result(rospy.Duration(0.2)), 180, 'the goal result', b)
+    t_result = time.monotonic()
+    assert client.client.get_state() == GoalStatus.SUCCEEDED, client.client.get_goal_status_text()
+    assert not client.bad_statuses(), client.transitions
+    x, y = rec.pose[:2]
+    assert math.hypot(x - goal_x, y - goal_y) <= 0.2, (x, y)
+    assert [t for t in client.feedback if t > t_promote], 'no feedback from B'
+    # every status array from B has the goal, ACTIVE from the very first one, then SUCCEEDED
+    from_b = rec.statuses_between(t_promote, t_result)
+    assert from_b and from_b[0][1].get(goal_id) == GoalStatus.ACTIVE, from_b[:3]
+    assert all(s[1].get(goal_id) in (GoalStatus.ACTIVE, GoalStatus.SUCCEEDED) for s in from_b), from_b
+    print(f'\nmove_base migration on one master: last command of A -> first command of B '
+          f'{first_b - last_a:.2f} s wall (freeze -> A stopped {t_b_start - t_frozen:.2f} s, '
+          f'B start-up to standby {t_b_standby - t_b_start:.2f} s); hand-over proper: promotion of B -> '
+          f'its first command {first_b - t_promote:.2f} s; goal {goal_id} SUCCEEDED '
+          f'{math.hypot(x - goal_x, y - goal_y):.3f} m from the target')
+
+    # ---- the fence: the frozen instance's commands are ignored by the simulator, the holder's obeyed
+    def turn_with(instance):
+        yaw0 = rec.pose[2]
+        proc = ros.master.run([sys.executable, '-c', FAKE_INSTANCE, instance], 'fake_instance')
+        wait_until(lambda: proc.poll() is not None, 60, f'the commands of {instance}')
+        assert proc.returncode == 0, proc.output()
+        wait_until(rec.stopped, 20, 'the robot to stop')
+        return abs(math.remainder(rec.pose[2] - yaw0, 2 * math.pi))
+    assert turn_with('move_base@robot') < 0.02                 # A's id: dropped
+    assert turn_with('move_base@cloud') > 0.3                  # the holder's id: obeyed
+    assert b.alive()
+    assert_clean(b, 'B')
+
+
+def test_a_cut_off_instance_pauses_and_resumes_and_a_frozen_one_takes_its_goal_back(world, instances):
+    """Lapse: no commands while the lease is not renewed, the goal resumes when it is. Rollback: a frozen
+    instance promoted again with its own state (a migration whose target failed) continues the goal."""
+    from actionlib_msgs.msg import GoalStatus
+    sim, rec, driver = world
+    c = instances('robot')
+    driver.wait_standby(90, host='robot')
+    client = Client()
+    driver.promote(host='robot')
+    driver.wait_active(10, host='robot')
+    wait_until(lambda: client.client.wait_for_server(rospy.Duration(0.5)), 30, 'the action server')
+    x0 = rec.pose[0]
+    goal_x = 1.0 if x0 > 3.0 else 5.0
+    goal_id = client.send(goal_x, 0.0)
+    wait_until(lambda: abs(rec.pose[0] - x0) > 0.8, 120, 'the robot under way', c)
+
+    # ---- lapse
+    driver.cut_off()                                            # renewals unanswered: the lease runs out
+    driver.wait_role('promoted', 5, host='robot')
+    t_lapse = time.monotonic()
+    wait_until(rec.stopped, 20, 'the robot to stop while the lease lapsed')
+    x_paused = rec.pose[0]
+    sim_time_passes(3.5)                                       # longer than controller_patience (3 s)
+    assert not rec.cmds_from('move_base@robot', t_lapse + IN_FLIGHT), 'commands during the lapse'
+    assert client.client.get_state() == GoalStatus.ACTIVE
+    assert abs(rec.pose[0] - x_paused) < 0.01
+    with driver.lock:
+        driver.answering = True                                 # the link is back
+    driver.wait_active(10, host='robot')
+    wait_until(lambda: abs(rec.pose[0] - x_paused) > 0.8, 120, 'the robot under way again', c)
+
+    # ---- frozen, then promoted again with its own state (rolled back)
+    state = driver.freeze(host='robot')
+    t_frozen = time.monotonic()
+    assert state['goal']['id'] == goal_id
+    wait_until(rec.stopped, 20, 'the robot to stop after the freeze')
+    assert not rec.cmds_from('move_base@robot', t_frozen + IN_FLIGHT), 'commands after the freeze'
+    assert not rec.statuses_between(t_frozen + IN_FLIGHT), 'status after the freeze'
+    t_promote = time.monotonic()
+    driver.promote(state, host='robot')
+    driver.wait_active(10, host='robot')
+
+    wait_until(lambda: client.client.wait_for_result(rospy.Duration(0.2)), 180, 'the goal result', c)
+    t_result = time.monotonic()
+    assert client.client.get_state() == GoalStatus.SUCCEEDED, client.client.get_goal_status_text()
+    assert not client.bad_statuses(), client.transitions
+    assert math.hypot(rec.pose[0] - goal_x, rec.pose[1]) <= 0.2
+    again = rec.statuses_between(t_promote, t_result)
+    assert again and again[0][1].get(goal_id) == GoalStatus.ACTIVE, again[:3]
+    assert c.alive()
+    assert_clean(c, 'C')
