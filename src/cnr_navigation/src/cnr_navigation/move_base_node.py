@@ -43,7 +43,7 @@ from cnr_navigation.core.planner import GlobalPlanner, PlanningError, path_with_
 from cnr_navigation.core.recovery import ClearCostmapRecovery, Recovery, RotateRecovery
 from cnr_navigation.costmap_ros import CostmapROS
 from cnr_navigation.ros_io import RosParamReader, TfHelper, path_msg, pose_stamped, pose_to_2d
-from migration_manager.instance import Hooks, ManagedInstance
+from migration_manager.instance import Hooks, ManagedInstance, prepare_process
 
 
 class _RecoveryBackend:
@@ -76,7 +76,8 @@ class MoveBaseNode(Hooks):
         self.global_frame = params.global_frame
         # migration (README "Migration state"); the managed instance is created last, once the node is complete
         self.instance: Optional[ManagedInstance] = None
-        self.managed = bool(rospy.get_param('~migration/role', ''))   # ManagedInstance's rule, known early
+        # ManagedInstance's rule, known early; a managed instance's subscriptions carry its host in their caller id
+        self.managed = prepare_process()
         self.output_lock = threading.RLock()     # outputs_open vs. each publication
         self.outputs_open = False                # action server, services and topics open (active, not frozen)
         self.open_lock = threading.Lock()        # opening vs. closing the outputs

@@ -58,7 +58,7 @@ class ManagerNode(Hooks):
         self.instance: Optional[ManagedInstance] = None
         self.sub: Optional[rospy.Subscriber] = None
         # the instance first (a managed one's subscriptions must carry its host in their caller id); a standby
-        # reports ready only once its merged_measurements subscription is connected (hooks.ready), so the
+        # reports ready only once its merged_measurements subscription is connected (hooks.standby_ready), so the
         # manager never freezes the active instance before this one buffers what follows
         self.instance = ManagedInstance('local_mapcell_manager', self)
         self.sub = rospy.Subscriber('merged_measurements', MergedMeasurement, self._on_measurement, queue_size=100)
@@ -75,7 +75,7 @@ class ManagerNode(Hooks):
                           f'at most {p.standby_buffer})')
 
     # -- migration (README "Migration state") -----------------------------------------------------
-    def ready(self) -> bool:
+    def standby_ready(self) -> bool:
         return self.sub is not None and self.sub.get_num_connections() > 0
 
     def get_state(self) -> Dict[str, Any]:

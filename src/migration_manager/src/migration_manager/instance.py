@@ -1,8 +1,8 @@
 """The module side of migrations: what a movable node (mfg, local_mapcell_manager, global_goal_manager,
 move_base) uses to be started as a standby, promoted, frozen and fenced by the migration manager.
 
-A node creates one :class:`ManagedInstance` with its :class:`Hooks`, before its first subscriber (see
-:func:`_distinct_subscriber_callerid`). When the node runs without a migration
+A node creates one :class:`ManagedInstance` with its :class:`Hooks` before its first subscriber, or calls
+:func:`prepare_process` before it (see :func:`_distinct_subscriber_callerid`). When the node runs without a migration
 manager (``~migration/role`` empty or absent: every single-master and fixed-placement run) the instance is
 *unmanaged*: always active, no extra topics. Managed, it follows the lease protocol of
 :mod:`migration_manager.core.lease`:
@@ -47,7 +47,7 @@ class Hooks:
     def set_state(self, state: Dict[str, Any]) -> None:
         raise NotImplementedError
 
-    def ready(self) -> bool:
+    def standby_ready(self) -> bool:
         """A standby can be promoted without losing input (e.g. its input subscriptions are connected)."""
         return True
 
@@ -63,26 +63,39 @@ def topic(module: str, leaf: str) -> str:
 
 
 def _distinct_subscriber_callerid(suffix: str) -> None:
-    """Make this process's subscriptions announce ``<node name>@<host>`` as their caller id.
+    """Make this process announce ``<node name>@<host>`` as its caller id in its TCPROS connection headers
+    (subscriptions and publications).
 
     The two instances of a module (one per host) share the node name (their topics, services and parameters
     keep their names across a migration). A rospy publisher keeps one connection per subscriber caller id and
     drops the older one when a second arrives (``_TopicImpl.add_connection``), so without this the standby's
     subscription would silently cut the active instance off from every publisher both subscribe to (its
-    inputs, and the manager's lease answers). The caller id in the TCPROS header is used by publishers only to
-    tell connections apart; registrations with the masters keep the node's real name.
+    inputs, and the manager's lease answers). Publications say the same name, so that a peer matching the two
+    (actionlib's ``wait_for_server`` checks that its goal publisher is connected to the caller id in the
+    server's status messages) still finds them. Registrations with the masters keep the node's real name.
     """
     from rospy.impl import tcpros_pubsub
-    original = tcpros_pubsub.TCPROSSub.get_header_fields
-    if getattr(original, '_cnr_instance_suffix', None) is not None:
-        return
+    for cls in (tcpros_pubsub.TCPROSSub, tcpros_pubsub.TCPROSPub):
+        original = cls.get_header_fields
+        if getattr(original, '_cnr_instance_suffix', None) is not None:
+            continue
 
-    def get_header_fields(self):
-        fields = original(self)
-        fields['callerid'] = f"{fields['callerid']}@{suffix}"
-        return fields
-    get_header_fields._cnr_instance_suffix = suffix
-    tcpros_pubsub.TCPROSSub.get_header_fields = get_header_fields
+        def get_header_fields(self, _original=original):
+            fields = _original(self)
+            fields['callerid'] = f"{fields['callerid']}@{suffix}"
+            return fields
+        get_header_fields._cnr_instance_suffix = suffix
+        cls.get_header_fields = get_header_fields
+
+
+def prepare_process(namespace: str = '~migration') -> bool:
+    """For a node that creates subscribers before its :class:`ManagedInstance`: if it runs managed, give its
+    subscriptions their per-host caller id now (see :func:`_distinct_subscriber_callerid`). Returns whether it
+    runs managed. Idempotent; :class:`ManagedInstance` calls it too."""
+    role = rospy.get_param(f'{namespace}/role', '')
+    if role:
+        _distinct_subscriber_callerid(str(rospy.get_param(f'{namespace}/host', '')))
+    return bool(role)
 
 
 class ManagedInstance:
@@ -146,7 +159,7 @@ class ManagedInstance:
     def _status(self) -> None:
         with self.lock:
             role = self._role()
-        ready = role != 'standby' or bool(self.hooks.ready())
+        ready = role != 'standby' or bool(self.hooks.standby_ready())
         msg = InstanceStatus(module=self.module, instance=self.id, role=role, term=self.holder.term,
                              ready=ready, pid=os.getpid(), message=self.message)
         msg.header.stamp = rospy.Time.from_sec(time.time())
@@ -168,7 +181,7 @@ class ManagedInstance:
     def _on_control(self, req) -> InstanceControlResponse:
         try:
             if req.command == 'state':
-                ready = self.holder.term > 0 or bool(self.hooks.ready())
+                ready = self.holder.term > 0 or bool(self.hooks.standby_ready())
                 return InstanceControlResponse(ok=True, message='ready' if ready else 'not ready',
                                                term=self.holder.term, state=self._state_bytes())
             if req.command == 'freeze':
