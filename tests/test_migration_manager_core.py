@@ -300,3 +300,14 @@ def test_rule_config_errors_name_the_field(workspace):
     cfg = from_section(s)
     with pytest.raises(ConfigError, match='rule.bad.rtt_above'):
         rule_from_section(s.section('rule'), cfg.modules, cfg.hosts, cfg.authority)
+
+
+def test_the_announcement_of_a_promotion_may_arrive_before_the_order():
+    h = Holder('mfg', 'mfg@cloud')
+    h.on_answer(Answer('mfg', 3, 'mfg@cloud', 0, False, D))     # the manager announced term 3 for this instance
+    h.promoted(3)                                               # ... then the promotion order arrives
+    assert h.term == 3 and not h.superseded
+    other = Holder('mfg', 'mfg@robot')
+    other.on_answer(Answer('mfg', 3, 'mfg@cloud', 0, False, D))
+    with pytest.raises(ValueError):
+        other.promoted(3)                                       # term 3 belongs to another instance

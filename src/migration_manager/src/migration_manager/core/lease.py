@@ -115,11 +115,12 @@ class Holder:
     next_nonce: int = 1
     sent: Dict[int, float] = field(default_factory=dict)    # nonce -> local send time
     superseded: bool = False    # a newer term or another holder was announced: this instance is done
-    seen: int = 0               # the highest term announced so far (a promotion must be newer)
+    seen: int = 0               # the highest term announced so far (a promotion must not be older)
+    seen_holder: str = ''       # the holder announced with it
 
     def promoted(self, term: int) -> None:
         """Promotion to ``term``: output waits for the first granted renewal."""
-        if term <= max(self.term, self.seen):
+        if term <= self.term or term < self.seen or (term == self.seen and self.seen_holder != self.instance):
             raise ValueError(f'{self.instance}: promotion to term {term}, but term {max(self.term, self.seen)} '
                              f'was already seen')
         self.term = term
@@ -139,7 +140,8 @@ class Holder:
     def on_answer(self, a: Answer) -> None:
         if a.module != self.module:
             return
-        self.seen = max(self.seen, a.term)
+        if a.term > self.seen:       # the announcement of this very promotion may arrive before the order
+            self.seen, self.seen_holder = a.term, a.holder
         if self.term == 0:
             return
         if a.term > self.term or (a.term == self.term and a.holder != self.instance):
