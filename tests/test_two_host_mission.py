@@ -119,7 +119,7 @@ def test_the_rule_moves_modules_as_the_link_degrades_and_recovers(tmp_path):
     every measurement is stored once, the report shows the placements over time and each migration."""
     status, s, report, out = two_host(tmp_path, 'all_robot', '--rule', '--trace',
                                       os.path.join(WS, 'config', 'trace_degrade.tsv'),
-                                      scenario=corridor(tmp_path, 170.0), timeout=600)
+                                      scenario=corridor(tmp_path, 300.0), timeout=900)
     assert status in (0, 3), out[-3000:]
     assert s['two_host']['migration'] and s['two_host']['rule']
     done = [m for m in s['migrations'] or [] if m['outcome'] == 'done']
