@@ -76,6 +76,7 @@ class MissionMonitor:
             rospy.Subscriber(profile_topic, NetworkProfile, self._on_profile, queue_size=10)
         # migration_manager (two-host runs with --migration): each migration's steps and the placement over time
         self.migrations: List[Dict] = []
+        self.measurements_store_up = 0
         self.placements: List[Tuple[float, str, str, int]] = []
         self.current_placement: Dict[str, Tuple[str, int]] = {}
         rospy.Subscriber('/migration_manager/events', MigrationEvent, self._on_migration, queue_size=100)
@@ -140,6 +141,10 @@ class MissionMonitor:
 
     def _on_measurement(self, msg: MergedMeasurement) -> None:
         self.measurements += 1
+        with self.lock:
+            lmm = self.current_placement.get('local_mapcell_manager')
+        if lmm is None or lmm[0]:       # unmanaged, or a managed store active (not starting, not migrating)
+            self.measurements_store_up += 1
         if self.measurements % 30 == 0:
             self._say(f'{self.measurements} measurements; latest {msg.temperature:.2f} degC at ({msg.x:.1f}, {msg.y:.1f})')
 
@@ -238,6 +243,9 @@ class MissionMonitor:
                 for k in ('idle', 'motors', 'cpu', 'radio', 'total', 'cpu_seconds', 'radio_bytes')},
             measurements_taken=len(records) or self.measurements,
             measurements_published_on_robot=self.measurements,
+            # of those, the ones published while a store was up (with migration_manager, the first instance of
+            # local_mapcell_manager starts after the merger: what came before it is not stored)
+            measurements_published_while_store_up=self.measurements_store_up,
             store_and_forward=None if self.relay is None else {
                 k: getattr(self.relay, k) for k in ('stream', 'epoch', 'last_seq', 'acked_seq', 'queued', 'appended',
                                                     'sent', 'resent', 'timeouts', 'full', 'rejected')},
