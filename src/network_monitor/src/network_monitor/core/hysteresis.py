@@ -1,0 +1,87 @@
+"""Mid-task re-decision with hysteresis and a migration budget (the thesis's future work, §4.2.3, §6.3).
+
+The thesis fixed the placement for a whole task, because migrating on every change of the network costs more
+than it saves (§4.2.3: "migrations are only allowed x amount of times"). A :class:`ReDecider` is fed the
+decisions made during the task (each a wanted placement and a confidence, e.g. the k-NN's vote fraction) and
+switches only when
+
+* the other placement has been wanted, with confidence >= ``margin``, in every update for at least ``dwell``
+  seconds (any update wanting the current placement, or with less confidence, restarts the wait), and
+* the migration budget allows it: at most ``max_migrations`` migrations in any ``window`` seconds (migrations
+  made elsewhere, e.g. the one before the task, are counted through :meth:`ReDecider.migrated`).
+
+A want that outlasts an exhausted budget is acted on as soon as the budget frees. With ``max_migrations: 1``
+and ``window: 30`` a link oscillating around the decision boundary causes at most one migration per 30 s;
+with ``dwell`` longer than the oscillation's half period, none. Pure: every call takes ``now`` [s, monotonic].
+"""
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from typing import Deque, Optional
+
+from network_monitor.core.evaluation import DECISIONS
+
+
+@dataclass(frozen=True)
+class ReDecisionSettings:
+    margin: float           # 0.5 < margin <= 1: confidence the other placement must be wanted with
+    dwell: float            # s (>= 0) it must be wanted before a switch
+    max_migrations: int     # >= 0 migrations per window (0: never switch mid-task)
+    window: float           # s (> 0)
+
+
+class ReDecider:
+    """The current placement of one task's modules, re-decided as decisions arrive.
+
+    Args:
+        settings: margin, dwell, budget.
+        placement: the placement at the start (offload | onload).
+    """
+
+    def __init__(self, settings: ReDecisionSettings, placement: str) -> None:
+        if placement not in DECISIONS:
+            raise ValueError(f'unknown placement {placement!r}')
+        self.settings = settings
+        self.placement = placement
+        self.wanted_since: Optional[float] = None   # when the other placement began to be wanted
+        self._migrations: Deque[float] = deque()
+        self._last: Optional[float] = None
+
+    def _clock(self, now: float) -> None:
+        if self._last is not None and now < self._last:
+            raise ValueError(f'time went backwards: {now} < {self._last}')
+        self._last = now
+        while self._migrations and self._migrations[0] <= now - self.settings.window:
+            self._migrations.popleft()
+
+    def migrated(self, now: float) -> None:
+        """Count a migration made at ``now`` outside this re-decider (e.g. before the task) in the budget."""
+        self._clock(now)
+        self._migrations.append(now)
+
+    def budget(self, now: float) -> int:
+        """Migrations still allowed at ``now`` within the window."""
+        self._clock(now)
+        return max(0, self.settings.max_migrations - len(self._migrations))
+
+    def update(self, now: float, wanted: str, confidence: float) -> Optional[str]:
+        """One decision at ``now``: ``wanted`` placement with ``confidence`` (0..1).
+
+        Returns:
+            the new placement if the modules should migrate now (the switch is recorded), else None.
+        """
+        if wanted not in DECISIONS:
+            raise ValueError(f'unknown placement {wanted!r}')
+        self._clock(now)
+        if wanted == self.placement or confidence < self.settings.margin:
+            self.wanted_since = None
+            return None
+        if self.wanted_since is None:
+            self.wanted_since = now
+        if now - self.wanted_since < self.settings.dwell or self.budget(now) <= 0:
+            return None
+        self.placement = wanted
+        self.wanted_since = None
+        self._migrations.append(now)
+        return wanted
