@@ -180,8 +180,10 @@ def test_three_instances_hand_over_a_search_and_a_patrol_goal(mission, mfg_param
         driver.wait_active(10)
         first = wait_until(lambda: rec.since('goal', t), 60, 'B: its first goal', b)[0]
         assert target(first) == pytest.approx(state_target(frozen['goal']), abs=1e-9)   # the same target
-        resumed = [m for m in rec.since('state', t) if m.mode == 'SEARCH']
-        assert resumed and resumed[0].message.startswith('resumed after a hand-over: hotspot search at '
+        # its state message may arrive after its goal (two connections): wait for it
+        resumed = wait_until(lambda: [m for m in rec.since('state', t) if m.mode == 'SEARCH'], 20,
+                             'B: its SEARCH state', b)
+        assert resumed[0].message.startswith('resumed after a hand-over: hotspot search at '
                                                          f'investigation cell {frozen["search"]["ic"]}'), resumed
         hotspot = wait_until(lambda: rec.since('hotspot', t), 300, 'B: the hotspot', b)[0]
         assert hotspot.cell_index == HEATER_CELL
