@@ -28,14 +28,22 @@ MODULE = 'global_goal_manager'
 
 class Bed:
     def __init__(self, workspace, logs):
-        from cnr_bringup.placement import load_catalog
-        from cnr_params import load_yaml
         from cnr_testbed.api import Testbed
-        from cnr_testbed.rosside import RosSide, start_bridge
         self.ws, self.logs = workspace, logs
         self.tb = Testbed(os.path.join(workspace, 'config', 'testbed.yaml'),
                           {'name': NAME, 'robot.namespace': f'{NAME}-robot', 'cloud.namespace': f'{NAME}-cloud'})
         self.tb.up()
+        self.robot = self.cloud = None
+        try:
+            self._start(workspace, logs)
+        except BaseException:
+            self.close()                     # nothing left behind when the set-up fails
+            raise
+
+    def _start(self, workspace, logs):
+        from cnr_bringup.placement import load_catalog
+        from cnr_params import load_yaml
+        from cnr_testbed.rosside import RosSide, start_bridge
         self.robot = RosSide(self.tb, 'robot', log_dir=str(logs))
         self.cloud = RosSide(self.tb, 'cloud', log_dir=str(logs))
         self.sides = {'robot': self.robot, 'cloud': self.cloud}
@@ -111,7 +119,8 @@ class Bed:
 
     def close(self):
         for side in (self.cloud, self.robot):
-            side.stop()
+            if side is not None:
+                side.stop()
         self.tb.down()
 
 
