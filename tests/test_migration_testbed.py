@@ -181,6 +181,8 @@ def test_hot_migration_to_a_warm_standby(bed):
     wait_until(lambda: len(bed.answers(time.time() - 1.0)) >= 5, 30, 'answers from the cloud')
     gap = largest_gap(bed.answers(t0 - 0.5))
     print(f'hot robot->cloud: {res.stdout.strip()}; consumer gap {1000 * gap:.0f} ms')
+    wait_until(lambda: any(inst == f'{MODULE}@cloud' for _, inst in bed.outputs(t0)), 20,
+               'the probe to receive the cloud instance\'s output')
     assert switch_is_clean(bed.outputs(t0), f'{MODULE}@robot', f'{MODULE}@cloud')
     assert gap < 2.0
 
