@@ -159,6 +159,8 @@ def test_cold_round_trip_is_make_before_break(bed):
         assert ': done' in res.stdout and 'hand-over' in res.stdout, res.stdout
         wait_until(lambda: len(bed.answers(time.time() - 1.0)) >= 5, 30, f'answers from {target}')
         t1 = time.time()
+        wait_until(lambda: any(inst == f'{MODULE}@{target}' for _, inst in bed.outputs(t0)), 20,
+                   f'the probe to receive the {target} instance\'s output')
         outputs = bed.outputs(t0)
         assert switch_is_clean(outputs, f'{MODULE}@{source}', f'{MODULE}@{target}'), outputs
         gap = largest_gap(bed.answers(t0 - 0.5))
@@ -174,7 +176,7 @@ def test_cold_round_trip_is_make_before_break(bed):
 def test_hot_migration_to_a_warm_standby(bed):
     res = bed.rosrun('robot', 'rosservice', 'call', '/migration/agents/cloud/command', 'start', MODULE)
     assert res.returncode == 0 and 'ok: True' in res.stdout, res.stdout + res.stderr
-    wait_until(lambda: (bed.status('cloud') or {}).get('role') == 'standby', 60, 'a warm standby on the cloud')
+    wait_until(lambda: (bed.status('cloud') or {}).get('role') == 'standby', 120, 'a warm standby on the cloud')
     t0 = time.time()
     res = bed.migrate('cloud', 'hot')
     assert res.returncode == 0, res.stdout + res.stderr
