@@ -178,10 +178,18 @@ class Bench:
                 time.sleep(self.args.settle)
 
     def stop(self) -> Dict:
+        """Ends the mission through the monitor's ~finish (it writes its report, with the store check), then stops
+        what is left."""
         if self.mission is None:
             return {}
-        self.mission.stop(timeout=120)
         path = os.path.join(self.out, 'mission', 'summary.json')
+        if self.mission.alive():
+            res = self.ns('robot', 'rosservice', 'call', '/mission_monitor/finish', timeout=60)
+            if res.returncode == 0:
+                self.wait('the mission report', lambda: os.path.exists(path), 180)
+            else:
+                report.progress(f'  (could not end the mission through ~finish: {res.stderr.strip()[-200:]})')
+        self.mission.stop(timeout=120)
         return json.load(open(path)) if os.path.exists(path) else {}
 
 
@@ -203,11 +211,12 @@ def write_markdown(out: str, args: argparse.Namespace, results: List[Dict], fail
                       [k[0], k[1], len(v), f'{percentile([float(x["promoted_after"]) for x in v if x["promoted_after"]], 50):.2f}',
                        f'{percentile([float(x["output_after"]) for x in v if x["output_after"]], 50):.2f}']
                       for k, v in sorted(report.group(failovers, 'rtt_ms', 'module').items())])]
-    lost = None
-    if summary:
-        lost = summary.get('measurements_published_on_robot', 0) - summary.get('measurements_taken', 0)
-    lines += ['', f'Measurements lost (merger output seen on the robot minus the active store at the end): '
-                  f'{lost if lost is not None else "–"}; move_base goals aborted: {aborted}.', '']
+    check = summary.get('store_check') or {}
+    lost = '–' if not check else (f'{check["missing_count"]} of {check["published_since_first"]} '
+                                  f'({check["duplicates"]} stored twice)')
+    lines += ['', f'Measurements lost (merged measurements the mission monitor saw between the store\'s first and '
+                  f'newest, missing from the active store at the end): {lost}; move_base goals aborted: {aborted}.',
+              '']
     report.write_text(os.path.join(out, 'migration.md'), '\n'.join(lines))
 
 

@@ -16,6 +16,7 @@ from typing import Dict, List, Optional, Tuple
 import rospy
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import BatteryState
+from std_srvs.srv import Trigger, TriggerResponse
 
 import cnr_params
 from cnr_maps.grid import MapcellGrid
@@ -76,11 +77,18 @@ class MissionMonitor:
             rospy.Subscriber(profile_topic, NetworkProfile, self._on_profile, queue_size=10)
         # migration_manager (two-host runs with --migration): each migration's steps and the placement over time
         self.migrations: List[Dict] = []
-        self.measurements_store_up = 0
+        self.published_stamps: List[float] = []     # every merged measurement seen, to check the store against
         self.placements: List[Tuple[float, str, str, int]] = []
         self.current_placement: Dict[str, Tuple[str, int]] = {}
         rospy.Subscriber('/migration_manager/events', MigrationEvent, self._on_migration, queue_size=100)
         rospy.Subscriber('/migration_manager/placement', Placement, self._on_placement, queue_size=10)
+        # ends the mission now (report written as at a timeout; a benchmark that runs the mission as a workload)
+        self.finish_requested = threading.Event()
+        rospy.Service('~finish', Trigger, self._on_finish)
+
+    def _on_finish(self, _req) -> TriggerResponse:
+        self.finish_requested.set()
+        return TriggerResponse(success=True, message=f'writing the report to {self.report_dir}')
 
     def _say(self, text: str) -> None:
         t = rospy.Time.now().to_sec() - (self.start_sim or rospy.Time.now().to_sec())
@@ -142,9 +150,7 @@ class MissionMonitor:
     def _on_measurement(self, msg: MergedMeasurement) -> None:
         self.measurements += 1
         with self.lock:
-            lmm = self.current_placement.get('local_mapcell_manager')
-        if lmm is None or lmm[0]:       # unmanaged, or a managed store active (not starting, not migrating)
-            self.measurements_store_up += 1
+            self.published_stamps.append(round(msg.header.stamp.to_sec(), 6))
         if self.measurements % 30 == 0:
             self._say(f'{self.measurements} measurements; latest {msg.temperature:.2f} degC at ({msg.x:.1f}, {msg.y:.1f})')
 
@@ -169,6 +175,9 @@ class MissionMonitor:
             if now - self.start_sim > self.timeout:
                 self._say(f'timeout after {self.timeout:g} s without a hotspot')
                 return False
+            if self.finish_requested.is_set():
+                self._say('asked to finish (~finish): ' + ('hotspot found' if self.hotspot else 'no hotspot yet'))
+                return self.hotspot is not None
             time.sleep(0.1)
         return False
 
@@ -188,9 +197,27 @@ class MissionMonitor:
         r = self.relay
         self._say('store-and-forward NOT drained: ' + ('no status' if r is None else f'{r.queued} still queued'))
 
+    @staticmethod
+    def _check_store(published: List[float], records: List[Measurement]) -> Dict:
+        """Every measurement published since the store's first one is in it, once. The store keeps measurements in
+        stamp order, so one published between its first and its newest stored stamp and missing from it is lost;
+        newer ones were in flight when the store was read. (With migration_manager the first instance of
+        local_mapcell_manager starts after the merger: what came before its first measurement is not stored.)"""
+        stored = [round(r.time, 6) for r in records]
+        if not stored:
+            return dict(stored=0, published_since_first=0, missing_count=0, missing=[], duplicates=0, in_flight=0)
+        first, newest, have = stored[0], stored[-1], set(stored)
+        window = [t for t in published if first <= t <= newest]
+        missing = [t for t in window if t not in have]
+        return dict(stored=len(stored), published_since_first=len(window), missing_count=len(missing),
+                    missing=missing[:50], duplicates=len(stored) - len(have),
+                    in_flight=sum(1 for t in published if t > newest))
+
     def write_report(self, found: bool) -> str:
         os.makedirs(self.report_dir, exist_ok=True)
         records: List[Measurement] = []
+        with self.lock:
+            published = list(self.published_stamps)
         try:
             rospy.wait_for_service('local_mapcell_manager/get_measurements', 10)
             res = rospy.ServiceProxy('local_mapcell_manager/get_measurements', GetMeasurements)(-1)
@@ -202,6 +229,7 @@ class MissionMonitor:
         except (rospy.ROSException, rospy.ServiceException) as exc:
             rospy.logwarn(f'could not fetch the stored measurements: {exc}')
         write_tsv(os.path.join(self.report_dir, 'measurements.tsv'), records)
+        store_check = self._check_store(published, records)
         with self.lock:
             profiles = list(self.profiles)
         if profiles:     # the robot's network profile over the mission (network_monitor, thesis Eq. 4-1)
@@ -243,9 +271,7 @@ class MissionMonitor:
                 for k in ('idle', 'motors', 'cpu', 'radio', 'total', 'cpu_seconds', 'radio_bytes')},
             measurements_taken=len(records) or self.measurements,
             measurements_published_on_robot=self.measurements,
-            # of those, the ones published while a store was up (with migration_manager, the first instance of
-            # local_mapcell_manager starts after the merger: what came before it is not stored)
-            measurements_published_while_store_up=self.measurements_store_up,
+            store_check=store_check,
             store_and_forward=None if self.relay is None else {
                 k: getattr(self.relay, k) for k in ('stream', 'epoch', 'last_seq', 'acked_seq', 'queued', 'appended',
                                                     'sent', 'resent', 'timeouts', 'full', 'rejected')},
