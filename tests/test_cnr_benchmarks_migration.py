@@ -31,4 +31,26 @@ def test_table_groups_and_percentiles():
                                                     consumer_gap='', manager_downtime='')]
     (g,) = group_results(res, ('rtt', 'module', 'mode'))
     row = g.row()
-    assert row[:4] == ['50', 'mfg', 'cold', '4/5'] and row[4] == '250' and row[6] == '400'
+    assert row[:5] == ['50', 'mfg', 'cold', '4/5', '4'] and row[5] == '250' and row[7] == '400'
+
+
+def test_a_move_base_gap_across_a_finished_goal_is_not_a_hand_over():
+    drive = [(9.0 + t / 10, '/mobile_base/commands/velocity', 'move_base@robot', True) for t in range(5)]
+    r = rows(drive + [(9.45, '/move_base/result', '3', True), (12.0, '/mobile_base/commands/velocity',
+                                                               'move_base@cloud', True)])
+    assert handover_gap(r, 'move_base', 'robot', 'cloud', 9.3, 9.6) is None
+    r = rows(drive + [(9.6, '/mobile_base/commands/velocity', 'move_base@cloud', True)])
+    assert math.isclose(handover_gap(r, 'move_base', 'robot', 'cloud', 9.3, 9.6), 0.2)
+
+
+def test_output_flowing_and_period(tmp_path):
+    from cnr_benchmarks.core.migration import output_flowing, output_period, read_probe
+    path = tmp_path / 'probe.tsv'
+    lines = ['time\ttopic\tinstance\tok'] + [f'{100 + t / 3:.6f}\t/mapcell_measurements\tlocal_mapcell_manager@robot\t1'
+                                            for t in range(300)]
+    path.write_text('\n'.join(lines) + '\n1\t/mapcell')             # a line still being written
+    r = read_probe(str(path), tail_bytes=2000)
+    assert 10 < len(r) < 300 and r[-1].time == read_probe(str(path))[-1].time
+    assert output_flowing(r, 'local_mapcell_manager', r[-1].time + 0.2, 0.5)
+    assert not output_flowing(r, 'local_mapcell_manager', r[-1].time + 1.0, 0.5)
+    assert math.isclose(output_period(read_probe(str(path)), 'local_mapcell_manager'), 1 / 3, rel_tol=1e-3)

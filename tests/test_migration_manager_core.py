@@ -244,7 +244,7 @@ def test_config_from_the_workspace_and_errors_name_the_field(workspace):
     data = load_yaml(os.path.join(workspace, 'config', 'migration.yaml'))
     cfg = from_section(Section(data, 'config/migration.yaml'))
     assert cfg.other('robot') == 'cloud' and 'mfg' in cfg.modules and cfg.lease.renew_period < cfg.lease.duration
-    bad = dict(data, lease=dict(data['lease'], renew_period=0.5))
+    bad = dict(data, lease=dict(data['lease'], renew_period=data['lease']['duration']))
     with pytest.raises(ConfigError, match='lease.renew_period'):
         from_section(Section(bad, 'config/migration.yaml'))
     bad = dict(data, hot_standby=['kestrel_driver'])

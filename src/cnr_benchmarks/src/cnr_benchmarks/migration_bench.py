@@ -28,11 +28,15 @@ from typing import Dict, List, Optional
 import yaml
 
 from cnr_benchmarks import report
-from cnr_benchmarks.core.migration import OUTPUT_TOPIC, group_results, handover_gap, read_probe, stray_outputs
+from cnr_benchmarks.core.migration import (OUTPUT_TOPIC, group_results, handover_gap, output_flowing, output_period,
+                                           read_probe, stray_outputs)
+
+# a module counts as working when its output came this recently [s] (move_base: a goal is being driven)
+FLOWING_WITHIN = {'move_base': 0.3, 'local_mapcell_manager': 1.5, 'mfg': 2.5, 'global_goal_manager': 0.5}
 
 COLUMNS = ['rtt_ms', 'module', 'mode', 'direction', 'run', 'outcome', 'manager_downtime', 'consumer_gap', 'stray',
            'duration', 'term']
-FAILOVER_COLUMNS = ['rtt_ms', 'module', 'trial', 'promoted_after', 'output_after', 'outcome']
+FAILOVER_COLUMNS = ['rtt_ms', 'module', 'standby', 'trial', 'promoted_after', 'output_after', 'outcome']
 RESULT = re.compile(r'migration (\d+): (\S+) -> (\S+): (\S+) \(term (\d+), ([\d.]+) s(?:; hand-over (\d+) ms)?\)')
 
 
@@ -54,8 +58,11 @@ class Bench:
     # ---------------------------------------------------------------- helpers
     def ns(self, side: str, *argv: str, timeout: float = 120.0) -> subprocess.CompletedProcess:
         s = self.sides[side]
-        return subprocess.run(['ip', 'netns', 'exec', s.namespace, *argv], env=s.env, capture_output=True,
-                              text=True, timeout=timeout)
+        try:
+            return subprocess.run(['ip', 'netns', 'exec', s.namespace, *argv], env=s.env, capture_output=True,
+                                  text=True, timeout=timeout)
+        except subprocess.TimeoutExpired:       # e.g. rostopic echo on a topic nobody publishes yet
+            return subprocess.CompletedProcess(argv, 124, '', f'timed out after {timeout:g} s')
 
     def placement(self) -> Dict[str, str]:
         out = self.ns('robot', 'rosrun', 'migration_manager', 'migrate', '--placement', '--timeout', '5', timeout=60)
@@ -106,7 +113,7 @@ class Bench:
             raise RuntimeError(f'the modules did not come up (see {self.out}/mission.log and the report logs)')
         self.robot.call('setParam', '/migration_probe', dict(
             topics=sorted({t for m, t in OUTPUT_TOPIC.items() if t.startswith('/')} | {'/merged_measurements'}),
-            next_goal_rate=20.0, out=self.probe_file))
+            next_goal_rate=10.0, out=self.probe_file))
         self.robot.run(['rosrun', 'migration_manager', 'migration_probe'], 'probe')
         report.progress('all modules active on the robot; probe running')
 
@@ -122,8 +129,15 @@ class Bench:
                        manager_downtime='' if m.group(7) is None else float(m.group(7)) / 1000.0)
         return out
 
+    def wait_flowing(self, module: str) -> bool:
+        """Order a migration while the module is producing output, so the consumer's gap is the hand-over's."""
+        return self.wait(f'{module} producing output', lambda: output_flowing(
+            read_probe(self.probe_file, tail_bytes=65536), module, time.time(), FLOWING_WITHIN[module]), 90)
+
     def warm_standby(self, module: str, host: str) -> bool:
-        self.ns('robot', 'rosservice', 'call', f'/migration/agents/{host}/command', 'start', module, timeout=30)
+        res = self.ns('robot', 'rosservice', 'call', f'/migration/agents/{host}/command', 'start', module, timeout=30)
+        if res.returncode != 0 or 'ok: True' not in res.stdout:
+            report.progress(f'  (the {host} agent did not start a {module} standby: {(res.stdout + res.stderr).strip()[-200:]})')
         return self.wait(f'a warm {module} standby on {host}', lambda: self.role(module, host) == 'standby', 120)
 
     def round_trips(self, results: report.TsvLog, rtt: float) -> None:
@@ -136,6 +150,7 @@ class Bench:
                                         outcome='no_standby', manager_downtime='', consumer_gap='', stray='',
                                         duration=0.0, term='')
                             continue
+                        self.wait_flowing(module)
                         r = self.migrate(module, target, mode)
                         time.sleep(self.args.settle)
                         rows = read_probe(self.probe_file)
@@ -152,30 +167,42 @@ class Bench:
                             report.progress(f'    {r["text"][-300:]}')
 
     def cutoffs(self, failover: report.TsvLog, rtt: float) -> None:
+        """The module active on the cloud, the link cut: the robot takes it over with the newest replicated state,
+        from a cold start (no standby on the robot) and from a warm standby started there before the cut."""
         for module in self.args.modules:
-            for trial in range(1, self.args.cutoff_trials + 1):
-                if self.placement().get(module) != 'cloud' and self.migrate(module, 'cloud', 'cold')['outcome'] != 'done':
-                    failover.row(rtt_ms=rtt, module=module, trial=trial, promoted_after='', output_after='',
-                                 outcome='not_on_cloud')
-                    continue
-                time.sleep(self.args.settle)
-                self.tb.set('both', outage=True)
-                t_cut = time.time()
-                ok = self.wait(f'{module} promoted on the robot', lambda: self.placement().get(module) == 'robot', 60)
-                promoted = time.time() - t_cut if ok else ''
-                time.sleep(2.0)
-                rows = read_probe(self.probe_file)
-                topic = OUTPUT_TOPIC[module]
-                first = next((r.time for r in rows if r.topic == topic and r.time > t_cut and r.ok and
-                              (topic == 'next_goal' or r.instance == f'{module}@robot')), None)
-                self.set_rtt(rtt)
-                failover.row(rtt_ms=rtt, module=module, trial=trial, promoted_after=promoted,
-                             output_after='' if first is None else first - t_cut, outcome='promoted' if ok else 'timeout')
-                report.progress(f'RTT {rtt:g} ms cut-off {module} #{trial}: promoted on the robot after '
-                                f'{promoted if promoted == "" else f"{promoted:.2f} s"}, output back after '
-                                f'{"–" if first is None else f"{first - t_cut:.2f} s"}')
-                self.wait(f'the cloud instance of {module} to step down', lambda: self.role(module, 'cloud') != 'active', 60)
-                time.sleep(self.args.settle)
+            for standby in ('cold', 'warm'):
+                for trial in range(1, self.args.cutoff_trials + 1):
+                    self.cutoff(failover, rtt, module, standby, trial)
+
+    def cutoff(self, failover: report.TsvLog, rtt: float, module: str, standby: str, trial: int) -> None:
+        key = dict(rtt_ms=rtt, module=module, standby=standby, trial=trial)
+        if self.placement().get(module) != 'cloud':
+            self.wait_flowing(module)
+            if self.migrate(module, 'cloud', 'cold')['outcome'] != 'done':
+                failover.row(**key, promoted_after='', output_after='', outcome='not_on_cloud')
+                return
+        if standby == 'warm' and not self.warm_standby(module, 'robot'):
+            failover.row(**key, promoted_after='', output_after='', outcome='no_standby')
+            return
+        time.sleep(self.args.settle)
+        self.wait_flowing(module)
+        self.tb.set('both', outage=True)
+        t_cut = time.time()
+        ok = self.wait(f'{module} promoted on the robot', lambda: self.placement().get(module) == 'robot', 150)
+        promoted = time.time() - t_cut if ok else ''
+        time.sleep(2.0)
+        rows = read_probe(self.probe_file, tail_bytes=1 << 22)
+        topic = OUTPUT_TOPIC[module]
+        first = next((r.time for r in rows if r.topic == topic and r.time > t_cut and r.ok and
+                      (topic == 'next_goal' or r.instance == f'{module}@robot')), None)
+        self.set_rtt(rtt)
+        failover.row(**key, promoted_after=promoted, output_after='' if first is None else first - t_cut,
+                     outcome='promoted' if ok else 'timeout')
+        report.progress(f'RTT {rtt:g} ms cut-off {module} ({standby} standby on the robot) #{trial}: promoted after '
+                        f'{"–" if promoted == "" else f"{promoted:.2f} s"}, output back after '
+                        f'{"–" if first is None else f"{first - t_cut:.2f} s"}')
+        self.wait(f'the cloud instance of {module} to step down', lambda: self.role(module, 'cloud') != 'active', 60)
+        time.sleep(self.args.settle)
 
     def stop(self) -> Dict:
         """Ends the mission through the monitor's ~finish (it writes its report, with the store check), then stops
@@ -194,23 +221,32 @@ class Bench:
 
 
 def write_markdown(out: str, args: argparse.Namespace, results: List[Dict], failovers: List[Dict],
-                   summary: Dict, aborted: int, started: str) -> None:
+                   summary: Dict, aborted: int, started: str, probe_file: str) -> None:
     from cnr_benchmarks.core.migration import percentile
-    groups = group_results(results, ('rtt_ms', 'module', 'mode', 'direction'))
+    header = ['done', 'gaps', 'gap p50', 'gap p95', 'gap max', 'manager p50', 'manager p95']
+    probe = read_probe(probe_file) if os.path.exists(probe_file) else []
+    periods = {m: output_period(probe, m) for m in args.modules}
     lines = [f'# Migration downtime ({started}, {platform.node()}, {os.cpu_count()} cores)', '',
-             f'`{" ".join(sys.argv) if sys.argv[0].endswith(".py") else "launch_scripts/bench_migration.sh"} '
-             f'{" ".join(args.argv)}`', '',
+             f'`launch_scripts/bench_migration.sh {" ".join(args.argv)}`', '',
              'Consumer gap: last output of the old instance to the first of the new one, measured on the robot '
-             '(migration_probe); manager: freeze answered -> first lease granted. ms; median / p95 / max.', '',
-             report.markdown_table(['RTT ms', 'module', 'mode', 'direction', 'done', 'gap p50', 'gap p95', 'gap max',
-                                    'manager p50', 'manager p95'], [g.row() for g in groups])]
+             '(migration_probe); manager: freeze answered -> first lease granted. ms; median / p95 / max over both '
+             'directions. "gaps" = migrations whose gap could be told (move_base: not when its goal ended during '
+             'the hand-over). Without any migration a consumer already sees the output period between two outputs: '
+             + ', '.join(f'{m} {1000 * p:.0f} ms' for m, p in periods.items() if p == p) + '.', '',
+             report.markdown_table(['RTT ms', 'module', 'mode', *header],
+                                   [g.row() for g in group_results(results, ('rtt_ms', 'module', 'mode'))]),
+             '', 'By direction:', '',
+             report.markdown_table(['RTT ms', 'module', 'mode', 'direction', *header],
+                                   [g.row() for g in group_results(results, ('rtt_ms', 'module', 'mode',
+                                                                              'direction'))])]
     if failovers:
-        lines += ['', 'Cut-off while active on the cloud: seconds until the robot instance is promoted / its output '
-                  'is back (median over trials).', '',
-                  report.markdown_table(['RTT ms', 'module', 'trials', 'promoted p50', 'output p50'], [
-                      [k[0], k[1], len(v), f'{percentile([float(x["promoted_after"]) for x in v if x["promoted_after"]], 50):.2f}',
-                       f'{percentile([float(x["output_after"]) for x in v if x["output_after"]], 50):.2f}']
-                      for k, v in sorted(report.group(failovers, 'rtt_ms', 'module').items())])]
+        lines += ['', 'Cut-off while active on the cloud: seconds from the cut until the robot instance is promoted / '
+                  'its output is back (median over trials); standby = what ran on the robot before the cut (cold: '
+                  'nothing, the instance is started then).', '',
+                  report.markdown_table(['RTT ms', 'module', 'standby', 'trials', 'promoted p50', 'output p50'], [
+                      [*k, len(v), percentile([float(x['promoted_after']) for x in v if x['promoted_after']], 50),
+                       percentile([float(x['output_after']) for x in v if x['output_after']], 50)]
+                      for k, v in sorted(report.group(failovers, 'rtt_ms', 'module', 'standby').items())])]
     check = summary.get('store_check') or {}
     lost = '–' if not check else (f'{check["missing_count"]} of {check["published_since_first"]} '
                                   f'({check["duplicates"]} stored twice)')
@@ -265,7 +301,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     aborted = 0
     if os.path.exists(bench.probe_file):
         aborted = sum(1 for r in read_probe(bench.probe_file) if r.topic == '/move_base/result' and r.instance == '4')
-    write_markdown(bench.out, args, res, fo, summary, aborted, started)
+    write_markdown(bench.out, args, res, fo, summary, aborted, started, bench.probe_file)
     report.progress(open(os.path.join(bench.out, 'migration.md')).read())
     return 0
 

@@ -5,11 +5,10 @@ Downtime (the issue's definition): from the last output of the old instance to t
 one, measured where the output is consumed. For a module whose output carries its instance (the
 ``cnr_instance`` connection header: local_mapcell_manager's mapcell_measurements, mfg's activity, move_base's
 cmd_vel) that is exact; for the global goal manager, whose only output is its service's answers, it is the
-longest gap between successful answers around the migration (the probe asks 20 times a second).
+longest gap between successful answers around the migration (the bench's probe asks 10 times a second).
 """
 from __future__ import annotations
 
-import csv
 import math
 from dataclasses import dataclass
 from typing import Dict, Iterable, List, Optional, Sequence, Tuple
@@ -33,10 +32,42 @@ class ProbeRow:
     ok: bool
 
 
-def read_probe(path: str) -> List[ProbeRow]:
+def read_probe(path: str, tail_bytes: int = 0) -> List[ProbeRow]:
+    """The probe's rows; with ``tail_bytes`` only those in the file's last bytes (cheap on a long run)."""
     with open(path, newline='') as f:
-        return [ProbeRow(float(r['time']), r['topic'], r['instance'], r['ok'] == '1')
-                for r in csv.DictReader(f, delimiter='\t') if r.get('time')]
+        if tail_bytes:
+            f.seek(0, 2)
+            start = max(0, f.tell() - tail_bytes)
+            f.seek(start)
+            lines = f.read().splitlines()[1:]       # the first line is partial (or the header)
+        else:
+            lines = f.read().splitlines()[1:]
+    rows = []
+    for line in lines:
+        parts = line.split('\t')
+        if len(parts) == 4:
+            try:
+                rows.append(ProbeRow(float(parts[0]), parts[1], parts[2], parts[3] == '1'))
+            except ValueError:
+                continue                             # a line being written
+    return rows
+
+
+def output_flowing(rows: Sequence[ProbeRow], module: str, now: float, within: float) -> bool:
+    """Is the module producing output now (a row of its output topic in the last ``within`` s)? For move_base
+    that means a goal is being driven: a hand-over measured then is not mixed with the wait for the next goal."""
+    topic = OUTPUT_TOPIC[module]
+    return any(r.topic == topic and r.ok and now - within <= r.time <= now for r in rows)
+
+
+def output_period(rows: Sequence[ProbeRow], module: str, longest: float = 5.0) -> float:
+    """Median time between two outputs of the module (gaps over ``longest`` s left out): the gap a consumer sees
+    without any migration."""
+    topic = OUTPUT_TOPIC[module]
+    times = np.array([r.time for r in rows if r.topic == topic and r.ok])
+    d = np.diff(times)
+    d = d[d <= longest]
+    return float(np.median(d)) if d.size else math.nan
 
 
 def handover_gap(rows: Sequence[ProbeRow], module: str, source: str, target: str, t0: float,
@@ -44,7 +75,8 @@ def handover_gap(rows: Sequence[ProbeRow], module: str, source: str, target: str
     """The consumer's downtime of one migration ordered at ``t0`` and answered at ``t1`` (wall s).
 
     None if it cannot be told (no output from the new instance within 10 s after ``t1``, or, for instance-tagged
-    outputs, none from the old one before the switch)."""
+    outputs, none from the old one before the switch), or, for move_base, if its goal ended in between (the gap
+    then holds the wait for the next goal)."""
     topic = OUTPUT_TOPIC[module]
     window = [r for r in rows if r.topic == topic and t0 - 5.0 <= r.time <= t1 + 10.0]
     if topic == 'next_goal':
@@ -57,7 +89,12 @@ def handover_gap(rows: Sequence[ProbeRow], module: str, source: str, target: str
     if first_new is None:
         return None
     last_old = max((r.time for r in window if r.instance == old and r.time <= first_new), default=None)
-    return None if last_old is None else first_new - last_old
+    if last_old is None:
+        return None
+    if module == 'move_base' and any(r.topic == '/move_base/result' and last_old <= r.time <= first_new
+                                     for r in rows):
+        return None
+    return first_new - last_old
 
 
 def stray_outputs(rows: Sequence[ProbeRow], module: str, source: str, target: str, t0: float, t1: float) -> int:
@@ -89,7 +126,7 @@ class Group:
         def ms(x: float) -> str:
             return '–' if not math.isfinite(x) else f'{1000 * x:.0f}'
         n_ok = self.outcomes.get('done', 0)
-        return [*map(str, self.key), f'{n_ok}/{sum(self.outcomes.values())}',
+        return [*map(str, self.key), f'{n_ok}/{sum(self.outcomes.values())}', str(len(self.gaps)),
                 ms(percentile(self.gaps, 50)), ms(percentile(self.gaps, 95)), ms(max(self.gaps, default=math.nan)),
                 ms(percentile(self.manager, 50)), ms(percentile(self.manager, 95))]
 
