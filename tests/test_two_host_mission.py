@@ -23,10 +23,12 @@ def scenario_line(path):
     return out.stdout.split()
 
 
-def corridor(tmp_path, timeout):
-    """The corridor scenario with another mission timeout [s of sim time]."""
+def corridor(tmp_path, timeout, extra_time=None):
+    """The corridor scenario with another mission timeout [s of sim time] (and time after the hotspot)."""
     data = yaml.safe_load(open(os.path.join(WS, 'config', 'scenarios', 'corridor.yaml')))
     data['mission']['timeout'] = timeout
+    if extra_time is not None:
+        data['mission']['extra_time'] = extra_time
     path = tmp_path / 'corridor_short.yaml'
     path.write_text(yaml.safe_dump(data))
     return str(path)
@@ -119,7 +121,7 @@ def test_the_rule_moves_modules_as_the_link_degrades_and_recovers(tmp_path):
     every measurement is stored once, the report shows the placements over time and each migration."""
     status, s, report, out = two_host(tmp_path, 'all_robot', '--rule', '--trace',
                                       os.path.join(WS, 'config', 'trace_degrade.tsv'),
-                                      scenario=corridor(tmp_path, 300.0), timeout=900)
+                                      scenario=corridor(tmp_path, 270.0, extra_time=1000.0), timeout=900)
     assert status in (0, 3), out[-3000:]
     assert s['two_host']['migration'] and s['two_host']['rule']
     done = [m for m in s['migrations'] or [] if m['outcome'] == 'done']
@@ -137,4 +139,6 @@ def test_the_rule_moves_modules_as_the_link_degrades_and_recovers(tmp_path):
     assert check['missing_count'] == 0 and check['duplicates'] == 0, check
     assert check['stored'] == len(numbers) <= s['measurements_published_on_robot'], (check, len(numbers))
     assert check['published_since_first'] == len(numbers) > 500, check
+    # the merger started once the store was up: nothing the robot measured came before the store's first
+    assert check['published_before_first'] == 0, check
     assert 'Traceback' not in out

@@ -173,8 +173,9 @@ class MissionMonitor:
             if self.hotspot is not None and now >= self.hotspot.header.stamp.to_sec() + self.extra_time:
                 return True
             if now - self.start_sim > self.timeout:
-                self._say(f'timeout after {self.timeout:g} s without a hotspot')
-                return False
+                self._say(f'timeout after {self.timeout:g} s ' +
+                          ('(the hotspot was found before)' if self.hotspot is not None else 'without a hotspot'))
+                return self.hotspot is not None
             if self.finish_requested.is_set():
                 self._say('asked to finish (~finish): ' + ('hotspot found' if self.hotspot else 'no hotspot yet'))
                 return self.hotspot is not None
@@ -201,17 +202,20 @@ class MissionMonitor:
     def _check_store(published: List[float], records: List[Measurement]) -> Dict:
         """Every measurement published since the store's first one is in it, once. The store keeps measurements in
         stamp order, so one published between its first and its newest stored stamp and missing from it is lost;
-        newer ones were in flight when the store was read. (With migration_manager the first instance of
-        local_mapcell_manager starts after the merger: what came before its first measurement is not stored.)"""
+        newer ones were in flight when the store was read; older ones (``published_before_first``) were made before
+        any store was up (the two-host mission with migration_manager starts the merger only once the first
+        instance of local_mapcell_manager is active, so there are none)."""
         stored = [round(r.time, 6) for r in records]
         if not stored:
-            return dict(stored=0, published_since_first=0, missing_count=0, missing=[], duplicates=0, in_flight=0)
+            return dict(stored=0, published_since_first=0, missing_count=0, missing=[], duplicates=0, in_flight=0,
+                        published_before_first=len(published))
         first, newest, have = stored[0], stored[-1], set(stored)
         window = [t for t in published if first <= t <= newest]
         missing = [t for t in window if t not in have]
         return dict(stored=len(stored), published_since_first=len(window), missing_count=len(missing),
                     missing=missing[:50], duplicates=len(stored) - len(have),
-                    in_flight=sum(1 for t in published if t > newest))
+                    in_flight=sum(1 for t in published if t > newest),
+                    published_before_first=sum(1 for t in published if t < first))
 
     def write_report(self, found: bool) -> str:
         os.makedirs(self.report_dir, exist_ok=True)

@@ -35,6 +35,7 @@ import json
 import os
 import re
 import signal
+import subprocess
 import sys
 import time
 import uuid
@@ -191,6 +192,8 @@ class TwoHostMission:
                          f'bridge_config:={self._bridge_config(side, peer, secret)}', f'secret_file:={secret}',
                          f'network_monitor_overlay:={self._monitor_overlay(side, peer)}',
                          *launch_args(self.placement, side.side)]
+            if side.side == self.deferred_merger:
+                host_args = ['merger:=false' if a == 'merger:=true' else a for a in host_args]
             relayed = self.placement.relayed()
             if len(relayed) > 1:
                 raise ConfigError(self.placement.name, 'store_forward', 'the two-host launch relays one stream at most')
@@ -212,6 +215,57 @@ class TwoHostMission:
             self.procs['trace'] = self.robot.run(tb_cli + ['trace', self.trace], 'trace')
         if self.link_map:
             self.procs['follow'] = self.robot.run(tb_cli + ['follow', '--map', self.link_map], 'follow')
+        if self.deferred_merger:             # after the trace: its time 0 is the mission's start
+            self._start_merger_once_stored(common)
+
+    @property
+    def deferred_merger(self) -> Optional[str]:
+        """The merger's host when it must wait for the store: with a managed local_mapcell_manager the store's first
+        instance is up only after the migration agents have started it (about a minute on the capped robot); a
+        merged measurement made before then would have no store."""
+        if self.migration and 'local_mapcell_manager' in self.placement.managed and \
+                'merger' not in self.placement.managed:
+            return self.placement.host('merger')
+        return None
+
+    def active_hosts(self) -> Dict[str, str]:
+        """Where each managed module is active now (``migrate --placement`` on the robot; {} if no answer)."""
+        try:
+            out = subprocess.run(['ip', 'netns', 'exec', self.robot.namespace, 'rosrun', 'migration_manager',
+                                  'migrate', '--placement', '--timeout', '3'], env=self.robot.env,
+                                 capture_output=True, text=True, timeout=30)
+        except subprocess.TimeoutExpired:
+            return {}
+        return {r.split()[0]: r.split()[1] for r in out.stdout.splitlines()
+                if len(r.split()) >= 2 and '(migrating)' not in r}
+
+    def _start_merger_once_stored(self, common: List[str]) -> None:
+        """Start the merger once a local_mapcell_manager instance is active, so that every merged measurement the
+        robot makes reaches a store (the robot does not move before its managed modules are up either)."""
+        host = self.deferred_merger
+        side = self.robot if host == 'robot' else self.cloud
+        limit = self.migration_cfg.timeouts.start + 60.0
+        print(f'[two-host] the merger starts once local_mapcell_manager is active (at most {limit:.0f} s)', flush=True)
+        t0 = time.monotonic()
+        active = ''
+        while time.monotonic() - t0 < limit:
+            active = self.active_hosts().get('local_mapcell_manager', '')
+            if active in ('robot', 'cloud'):
+                break
+            for name, proc in self.procs.items():
+                if proc.poll() is not None:
+                    raise TestbedError(f'{name} ended with status {proc.poll()} while the modules were starting '
+                                       f'(log: {proc.log_path})')
+            time.sleep(1.0)
+        if active in ('robot', 'cloud'):
+            print(f'[two-host] local_mapcell_manager active on the {active} after {time.monotonic() - t0:.0f} s: '
+                  f'starting the merger on the {host}', flush=True)
+        else:
+            print(f'[two-host] local_mapcell_manager not active after {limit:.0f} s: starting the merger anyway '
+                  f'(measurements made before a store is up are not stored)', flush=True)
+        store = os.path.join(self.report_dir, f'store_{host}.tsv')
+        self._launch(side, 'merger', ['cnr_mission', 'modules.launch', *common, f'store:={store}', 'merger:=true'],
+                     prefix=self._robot_cpu() if host == 'robot' else None)
 
     def watch(self) -> int:
         """Print the world launch's output until the mission monitor ends; the exit status."""

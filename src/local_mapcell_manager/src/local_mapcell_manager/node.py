@@ -76,7 +76,17 @@ class ManagerNode(Hooks):
 
     # -- migration (README "Migration state") -----------------------------------------------------
     def standby_ready(self) -> bool:
-        return self.sub is not None and self.sub.get_num_connections() > 0
+        """Connected to the merged measurements' publishers, or none is registered yet (the mission's first
+        instance: the two-host mission starts the merger only once a store is active, so waiting for it here would
+        wait forever)."""
+        if self.sub is None:
+            return False
+        if self.sub.get_num_connections() > 0:
+            return True
+        try:
+            return all(name != self.sub.resolved_name for name, _type in rospy.get_published_topics())
+        except (rospy.ROSException, OSError):
+            return False
 
     def get_state(self) -> Dict[str, Any]:
         with self.instance.lock, self.lock:            # (reentrant: a freeze calls this holding instance.lock)
