@@ -7,7 +7,8 @@ calls the global goal manager 20 times a second and records which instance answe
 - a hot migration to a warm standby;
 - exactly one active under a partition: cut the link while the module is active on the cloud: the cloud
   instance closes its outputs, the robot's is promoted; after the link returns there is still exactly one;
-- rollback: a target that crashes at start leaves the module where it was, answering throughout.
+- rollback: a target that crashes at start leaves the module where it was, answering throughout;
+- a migration ordered while the link is down is rolled back: the module is not stranded on the unreachable side.
 The figures (downtime) are the benchmark's business (launch_scripts/bench_migration.sh); bounds here are loose.
 """
 import csv
@@ -232,3 +233,34 @@ def test_a_target_that_crashes_at_start_is_rolled_back(bed):
     assert bed.placement()[MODULE][0] == 'robot'
     gap = largest_gap(bed.answers(t0))
     assert gap < 1.0, gap                            # the robot's instance answered throughout
+
+
+def test_a_migration_ordered_while_the_link_is_down_does_not_strand_the_module(bed):
+    """The cloud is unreachable when the migration is ordered: the manager (on the robot) rolls it back, the
+    robot's instance answers throughout and stays the only active one; once the link is back the same order
+    succeeds, and the robot can take the module back."""
+    if bed.placement()[MODULE][0] != 'robot':
+        assert bed.migrate('robot', 'cold').returncode == 0
+    term = bed.placement()[MODULE][1]
+    bed.tb.set('both', outage=True)
+    try:
+        t0 = time.time()
+        res = bed.migrate('cloud', 'cold')
+        took = time.time() - t0
+        print(f'ordered during the outage: {res.stdout.strip()} ({took:.1f} s)')
+        assert res.returncode == 1 and ('rolled_back' in res.stdout or 'failed' in res.stdout), \
+            res.stdout + res.stderr
+        p = bed.placement()[MODULE]
+        assert p[0] == 'robot' and not p[2], p
+        assert (bed.status('robot') or {}).get('role') == 'active'
+        gap = largest_gap(bed.answers(t0))
+        assert gap < 1.0, gap                        # the robot's instance answered throughout
+    finally:
+        bed.tb.set('both', outage=False)
+    # the cloud instance a start request may have left behind never became active
+    assert (bed.status('cloud') or {}).get('role') != 'active'
+    wait_until(lambda: bed.migrate('cloud', 'cold').returncode == 0, 120, 'the migration to succeed after the outage',
+               interval=5.0)
+    assert bed.placement()[MODULE][0] == 'cloud' and bed.placement()[MODULE][1] > term
+    assert bed.migrate('robot', 'cold').returncode == 0
+    assert bed.placement()[MODULE][0] == 'robot'

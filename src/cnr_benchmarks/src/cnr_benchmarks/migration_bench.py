@@ -28,6 +28,7 @@ from typing import Dict, List, Optional
 import yaml
 
 from cnr_benchmarks import report
+from migration_manager.cli import parse_placement
 from cnr_benchmarks.core.migration import (OUTPUT_TOPIC, group_results, handover_gap, output_flowing, output_period,
                                            read_probe, stray_outputs)
 
@@ -66,7 +67,7 @@ class Bench:
 
     def placement(self) -> Dict[str, str]:
         out = self.ns('robot', 'rosrun', 'migration_manager', 'migrate', '--placement', '--timeout', '5', timeout=60)
-        return {r.split()[0]: r.split()[1] for r in out.stdout.splitlines() if r.strip() and '(migrating)' not in r}
+        return parse_placement(out.stdout)
 
     def role(self, module: str, side: str) -> str:
         out = self.ns(side, 'rostopic', 'echo', '-n', '1', f'/migration/{module}/{side}/status', timeout=15)

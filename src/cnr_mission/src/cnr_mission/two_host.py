@@ -50,6 +50,7 @@ from cnr_params.config import EXIT_CONFIG, ConfigError, Section, load_yaml
 from cnr_testbed import cpucap
 from cnr_testbed.api import Testbed, TestbedError
 from cnr_testbed.rosside import RosSide, bridge_config
+from migration_manager.cli import parse_placement
 
 EXIT_INTERRUPTED = 130
 EXIT_NOT_FOUND = 3
@@ -236,8 +237,7 @@ class TwoHostMission:
                                  capture_output=True, text=True, timeout=30)
         except subprocess.TimeoutExpired:
             return {}
-        return {r.split()[0]: r.split()[1] for r in out.stdout.splitlines()
-                if len(r.split()) >= 2 and '(migrating)' not in r}
+        return parse_placement(out.stdout)
 
     def _start_merger_once_stored(self, common: List[str]) -> None:
         """Start the merger once a local_mapcell_manager instance is active, so that every merged measurement the

@@ -1,9 +1,42 @@
 """Parameter-server side of :mod:`cnr_params`: read a node's private namespace as a :class:`Section`."""
 from __future__ import annotations
 
+import os
+
 import rospy
 
 from cnr_params.config import Section
+
+# set (to the host's name) in the environment of a module instance that migration_manager may move: the instance
+# announces "<node name>@<host>" in its TCPROS headers from its very first connection (see distinct_callerid)
+CALLERID_SUFFIX_ENV = 'CNR_CALLERID_SUFFIX'
+
+
+def distinct_callerid(suffix: str) -> None:
+    """Make this process announce ``<node name>@<suffix>`` as its caller id in its TCPROS connection headers
+    (subscriptions and publications); registrations with the master keep the node's real name.
+
+    Two instances of a module (one per host, managed by migration_manager) share the node name, so that topics,
+    services and parameters keep their names across a migration. A rospy publisher keeps one connection per
+    subscriber caller id and drops the older one when a second arrives (``_TopicImpl.add_connection``): without
+    this, a standby's subscription silently cuts the active instance off from every publisher both subscribe to
+    (its inputs, the lease answers, and ``/clock``, which ``rospy.init_node`` subscribes: an instance that lost
+    it stands still in sim time). Publications say the same name, so that a peer matching the two (actionlib's
+    ``wait_for_server`` checks that its goal publisher is connected to the caller id in the server's status
+    messages) still finds them. Idempotent.
+    """
+    from rospy.impl import tcpros_pubsub
+    for cls in (tcpros_pubsub.TCPROSSub, tcpros_pubsub.TCPROSPub):
+        original = cls.get_header_fields
+        if getattr(original, '_cnr_instance_suffix', None) is not None:
+            continue
+
+        def get_header_fields(self, _original=original):
+            fields = _original(self)
+            fields['callerid'] = f"{fields['callerid']}@{suffix}"
+            return fields
+        get_header_fields._cnr_instance_suffix = suffix
+        cls.get_header_fields = get_header_fields
 
 
 def private_section(namespace: str = '~') -> Section:
@@ -34,6 +67,9 @@ def init_node(name: str, **kwargs) -> None:
     import signal
     import sys
     import threading
+    suffix = os.environ.get(CALLERID_SUFFIX_ENV, '')
+    if suffix:                           # before init_node: its /clock subscription must carry it too
+        distinct_callerid(suffix)
     rospy.init_node(name, disable_signals=True, **kwargs)
 
     def expected_at_shutdown(exc_type) -> bool:

@@ -8,7 +8,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
-from typing import List, Optional
+from typing import Dict, List, Optional
 
 import rospy
 
@@ -16,6 +16,13 @@ from cnr_msgs.msg import Placement
 from cnr_msgs.srv import Migrate
 
 SERVICE = '/migration_manager/migrate'
+
+
+def parse_placement(text: str) -> Dict[str, str]:
+    """``migrate --placement``'s output -> {module: host it is active on ('-': none)}; modules being migrated
+    are left out (for scripts that run the command in another network namespace)."""
+    return {r.split()[0]: r.split()[1] for r in text.splitlines()
+            if len(r.split()) >= 2 and '(migrating)' not in r}
 
 
 def main(argv: Optional[List[str]] = None) -> int:

@@ -30,7 +30,7 @@ import rospy
 
 from cnr_msgs.msg import InstanceStatus, MigrationLease, MigrationRenew, ModuleState
 from cnr_msgs.srv import InstanceControl, InstanceControlResponse
-from cnr_params.ros import private_section
+from cnr_params.ros import distinct_callerid, private_section
 from migration_manager.core import state as state_codec
 from migration_manager.core.config import MigrationConfig, from_section
 from migration_manager.core.lease import Answer, Holder, instance_id
@@ -63,29 +63,10 @@ def topic(module: str, leaf: str) -> str:
 
 
 def _distinct_subscriber_callerid(suffix: str) -> None:
-    """Make this process announce ``<node name>@<host>`` as its caller id in its TCPROS connection headers
-    (subscriptions and publications).
-
-    The two instances of a module (one per host) share the node name (their topics, services and parameters
-    keep their names across a migration). A rospy publisher keeps one connection per subscriber caller id and
-    drops the older one when a second arrives (``_TopicImpl.add_connection``), so without this the standby's
-    subscription would silently cut the active instance off from every publisher both subscribe to (its
-    inputs, and the manager's lease answers). Publications say the same name, so that a peer matching the two
-    (actionlib's ``wait_for_server`` checks that its goal publisher is connected to the caller id in the
-    server's status messages) still finds them. Registrations with the masters keep the node's real name.
-    """
-    from rospy.impl import tcpros_pubsub
-    for cls in (tcpros_pubsub.TCPROSSub, tcpros_pubsub.TCPROSPub):
-        original = cls.get_header_fields
-        if getattr(original, '_cnr_instance_suffix', None) is not None:
-            continue
-
-        def get_header_fields(self, _original=original):
-            fields = _original(self)
-            fields['callerid'] = f"{fields['callerid']}@{suffix}"
-            return fields
-        get_header_fields._cnr_instance_suffix = suffix
-        cls.get_header_fields = get_header_fields
+    """``<node name>@<host>`` in this process's TCPROS headers (:func:`cnr_params.ros.distinct_callerid`). An
+    instance started by a migration agent has it from before ``init_node`` (modules.launch sets
+    ``CNR_CALLERID_SUFFIX``); this covers nodes started otherwise (tests driving instances on one master)."""
+    distinct_callerid(suffix)
 
 
 def prepare_process(namespace: str = '~migration') -> bool:
