@@ -44,7 +44,7 @@ from typing import Dict, List, Optional
 import yaml
 
 from cnr_bringup.placement import Placement, launch_args, load_catalog, describe
-from cnr_harness import Proc
+from cnr_harness import Proc, WaitTimeout, wait_until
 from cnr_mission.core.report import write_summary
 from cnr_params.config import EXIT_CONFIG, ConfigError, Section, load_yaml
 from cnr_testbed import cpucap
@@ -247,20 +247,19 @@ class TwoHostMission:
         limit = self.migration_cfg.timeouts.start + 60.0
         print(f'[two-host] the merger starts once local_mapcell_manager is active (at most {limit:.0f} s)', flush=True)
         t0 = time.monotonic()
-        active = ''
-        while time.monotonic() - t0 < limit:
-            active = self.active_hosts().get('local_mapcell_manager', '')
-            if active in ('robot', 'cloud'):
-                break
+
+        def store_active() -> str:
             for name, proc in self.procs.items():
                 if proc.poll() is not None:
                     raise TestbedError(f'{name} ended with status {proc.poll()} while the modules were starting '
                                        f'(log: {proc.log_path})')
-            time.sleep(1.0)
-        if active in ('robot', 'cloud'):
+            active = self.active_hosts().get('local_mapcell_manager', '')
+            return active if active in ('robot', 'cloud') else ''
+        try:
+            active = wait_until(store_active, limit, 'local_mapcell_manager active', interval=1.0)
             print(f'[two-host] local_mapcell_manager active on the {active} after {time.monotonic() - t0:.0f} s: '
                   f'starting the merger on the {host}', flush=True)
-        else:
+        except WaitTimeout:
             print(f'[two-host] local_mapcell_manager not active after {limit:.0f} s: starting the merger anyway '
                   f'(measurements made before a store is up are not stored)', flush=True)
         store = os.path.join(self.report_dir, f'store_{host}.tsv')

@@ -2,7 +2,7 @@
 move_base) uses to be started as a standby, promoted, frozen and fenced by the migration manager.
 
 A node creates one :class:`ManagedInstance` with its :class:`Hooks` before its first subscriber, or calls
-:func:`prepare_process` before it (see :func:`_distinct_subscriber_callerid`). When the node runs without a migration
+:func:`prepare_process` before it (see :func:`cnr_params.ros.distinct_callerid`). When the node runs without a migration
 manager (``~migration/role`` empty or absent: every single-master and fixed-placement run) the instance is
 *unmanaged*: always active, no extra topics. Managed, it follows the lease protocol of
 :mod:`migration_manager.core.lease`:
@@ -62,20 +62,14 @@ def topic(module: str, leaf: str) -> str:
     return f'/migration/{module}/{leaf}'
 
 
-def _distinct_subscriber_callerid(suffix: str) -> None:
-    """``<node name>@<host>`` in this process's TCPROS headers (:func:`cnr_params.ros.distinct_callerid`). An
-    instance started by a migration agent has it from before ``init_node`` (modules.launch sets
-    ``CNR_CALLERID_SUFFIX``); this covers nodes started otherwise (tests driving instances on one master)."""
-    distinct_callerid(suffix)
-
-
 def prepare_process(namespace: str = '~migration') -> bool:
     """For a node that creates subscribers before its :class:`ManagedInstance`: if it runs managed, give its
-    subscriptions their per-host caller id now (see :func:`_distinct_subscriber_callerid`). Returns whether it
+    subscriptions their per-host caller id now (see :func:`cnr_params.ros.distinct_callerid`). Returns whether it
     runs managed. Idempotent; :class:`ManagedInstance` calls it too."""
     role = rospy.get_param(f'{namespace}/role', '')
     if role:
-        _distinct_subscriber_callerid(str(rospy.get_param(f'{namespace}/host', '')))
+        # (an agent-started instance has it from before init_node: modules.launch sets CNR_CALLERID_SUFFIX)
+        distinct_callerid(str(rospy.get_param(f'{namespace}/host', '')))
     return bool(role)
 
 
@@ -87,7 +81,7 @@ class ManagedInstance:
         self.role_param = section.string('role', '') if 'role' in section else ''
         self.managed = bool(self.role_param)
         if self.managed:
-            _distinct_subscriber_callerid(section.string('host'))
+            distinct_callerid(section.string('host'))
         self.lock = threading.RLock()
         self.frozen = False
         self.was_active = False
