@@ -9,7 +9,7 @@ import pytest
 
 from cnr_maps.grid import MapcellGrid
 from cnr_params import ConfigError, Section
-from cnr_mission.core.report import CellSummary, path_length, render_png, write_summary
+from cnr_mission.core.report import CellSummary, check_store, path_length, render_png, write_summary
 from global_goal_manager.core.policies import CellView, CoverageSweep, LeastRecentlyVisited, make_policy
 from kestrel_driver.core.field import TemperatureField
 from kestrel_driver.core.parser import ParseError, parse_line
@@ -303,3 +303,19 @@ def test_activity_tracker_gaps_and_waits():
     assert (r.goal_waits, r.goal_wait_total, r.goal_wait_longest) == (2, pytest.approx(0.7), 0.5)
     assert r.longest_idle == pytest.approx(4.0)
     assert a.report(20.66).longest_input_gap == pytest.approx(6.0)      # an open gap counts up to now
+
+
+def test_store_check_compares_only_what_both_saw_and_finds_losses_and_duplicates():
+    published = [1.0, 2.0, 3.0, 4.0, 5.0, 6.0]
+    # the store connected after the first and was read before the last: nothing lost
+    c = check_store(published, [2.0, 3.0, 4.0, 5.0])
+    assert (c['missing_count'], c['duplicates'], c['unseen'], c['published_before_first'], c['in_flight']) == \
+        (0, 0, 0, 1, 1)
+    assert c['published_since_first'] == c['stored_in_window'] == 4
+    # the monitor connected to a new merger after the store did, and the store was read after the monitor's copy
+    c = check_store([2.0, 3.0, 4.0], [1.0, 2.0, 3.0, 4.0, 5.0])
+    assert c['missing_count'] == 0 and c['unseen'] == 0 and c['published_since_first'] == 3, c
+    # one lost in the middle, one stored twice, one the monitor never saw
+    c = check_store(published, [1.0, 2.0, 2.0, 3.5, 4.0, 6.0])
+    assert (c['missing_count'], c['missing'], c['duplicates'], c['unseen']) == (2, [3.0, 5.0], 1, 1), c
+    assert check_store(published, [])['published_before_first'] == 6

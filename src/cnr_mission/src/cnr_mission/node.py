@@ -22,7 +22,7 @@ import cnr_params
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.mapio import load_map
 from cnr_maps.measurements import Measurement, write_tsv
-from cnr_mission.core.report import CellSummary, path_length, render_png, write_summary
+from cnr_mission.core.report import CellSummary, check_store, path_length, render_png, write_summary
 from cnr_mission.core.scenario import read_mission
 from cnr_msgs.msg import (BatteryEnergy, CellStates, Hotspot, MergedMeasurement, MfgActivity, MigrationEvent,
                           NetworkProfile, Placement, SearchState, StoreForwardStatus)
@@ -198,30 +198,9 @@ class MissionMonitor:
         r = self.relay
         self._say('store-and-forward NOT drained: ' + ('no status' if r is None else f'{r.queued} still queued'))
 
-    @staticmethod
-    def _check_store(published: List[float], records: List[Measurement]) -> Dict:
-        """Every measurement published since the store's first one is in it, once. The store keeps measurements in
-        stamp order, so one published between its first and its newest stored stamp and missing from it is lost;
-        newer ones were in flight when the store was read; older ones (``published_before_first``) were made before
-        any store was up (the two-host mission with migration_manager starts the merger only once the first
-        instance of local_mapcell_manager is active, so there are none)."""
-        stored = [round(r.time, 6) for r in records]
-        if not stored:
-            return dict(stored=0, published_since_first=0, missing_count=0, missing=[], duplicates=0, in_flight=0,
-                        published_before_first=len(published))
-        first, newest, have = stored[0], stored[-1], set(stored)
-        window = [t for t in published if first <= t <= newest]
-        missing = [t for t in window if t not in have]
-        return dict(stored=len(stored), published_since_first=len(window), missing_count=len(missing),
-                    missing=missing[:50], duplicates=len(stored) - len(have),
-                    in_flight=sum(1 for t in published if t > newest),
-                    published_before_first=sum(1 for t in published if t < first))
-
     def write_report(self, found: bool) -> str:
         os.makedirs(self.report_dir, exist_ok=True)
         records: List[Measurement] = []
-        with self.lock:
-            published = list(self.published_stamps)
         try:
             rospy.wait_for_service('local_mapcell_manager/get_measurements', 10)
             res = rospy.ServiceProxy('local_mapcell_manager/get_measurements', GetMeasurements)(-1)
@@ -233,7 +212,9 @@ class MissionMonitor:
         except (rospy.ROSException, rospy.ServiceException) as exc:
             rospy.logwarn(f'could not fetch the stored measurements: {exc}')
         write_tsv(os.path.join(self.report_dir, 'measurements.tsv'), records)
-        store_check = self._check_store(published, records)
+        with self.lock:      # read after the store: whatever the store holds was published before this copy
+            published = list(self.published_stamps)
+        store_check = check_store(published, [r.time for r in records])
         with self.lock:
             profiles = list(self.profiles)
         if profiles:     # the robot's network profile over the mission (network_monitor, thesis Eq. 4-1)

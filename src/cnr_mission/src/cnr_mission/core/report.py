@@ -106,3 +106,29 @@ def render_png(path: str, cells: Sequence[CellSummary], trajectory: Sequence[Tup
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def check_store(published: Sequence[float], stored_stamps: Sequence[float]) -> Dict:
+    """Every measurement published while both the store and this monitor were listening is in the store, once.
+    The store keeps measurements in stamp order; the window is the stamps both saw: from the later of the two
+    first ones (either subscriber may connect to a new merger first) to the earlier of the two newest ones (the
+    newest may have been in flight to either when the report was written). One published in the window and
+    missing from the store is lost; one stored in the window that this monitor never saw (``unseen``) means the
+    monitor dropped it. Outside the window: ``published_before_first`` were made before the store was up (the
+    two-host mission with migration_manager starts the merger only once the first local_mapcell_manager
+    instance is active, so at most a connection race's worth), ``in_flight`` after its newest."""
+    stored = sorted(round(t, 6) for t in stored_stamps)
+    if not stored or not published:
+        return dict(stored=len(stored), published_since_first=0, stored_in_window=0, missing_count=0, missing=[],
+                    unseen=0, duplicates=len(stored) - len(set(stored)), in_flight=0,
+                    published_before_first=len(published))
+    lo, hi = max(stored[0], min(published)), min(stored[-1], max(published))
+    have, seen = set(stored), set(published)
+    window = [t for t in published if lo <= t <= hi]
+    in_store = [t for t in stored if lo <= t <= hi]
+    missing = [t for t in window if t not in have]
+    return dict(stored=len(stored), published_since_first=len(window), stored_in_window=len(in_store),
+                missing_count=len(missing), missing=missing[:50],
+                unseen=sum(1 for t in in_store if t not in seen), duplicates=len(stored) - len(have),
+                in_flight=sum(1 for t in published if t > stored[-1]),
+                published_before_first=sum(1 for t in published if t < stored[0]))
