@@ -547,7 +547,7 @@ def test_every_config_key_is_documented_with_a_comment():
     assert undocumented == []
     assert set(yaml.safe_load(open(CONFIG))) == {'training_dir', 'k', 'normalisation', 'cold_start', 'exploration',
                                                  'evaluation', 'redecision', 'robot_host', 'cloud_host', 'tasks',
-                                                 'locations'}
+                                                 'locations', 'decider'}
 
 
 def test_decision_module_uses_sklearn_knn():

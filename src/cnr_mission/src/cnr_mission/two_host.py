@@ -66,20 +66,43 @@ def _on_signal(signum, _frame) -> None:
     raise Stop()
 
 
+class TaskMode:
+    """``--task-plan``: instead of the monitoring mission, the task_runner runs a plan of tasks (exp_control.sh,
+    exp_campaign.sh). Only the task's modules run, managed by migration_manager (they start on the robot); the
+    robot also runs network_monitor's migration_decider with the given training sets and control values."""
+
+    def __init__(self, plan: str, results: str, modules: List[str], training_dir: str, control_values: str) -> None:
+        self.plan, self.results, self.modules = plan, results, list(modules)
+        self.training_dir, self.control_values = training_dir, control_values
+
+    def world_args(self, testbed_config: str) -> List[str]:
+        return [f'task_plan:={self.plan}', f'task_results:={self.results}', f'testbed_config:={testbed_config}']
+
+    def host_args(self, args: List[str]) -> List[str]:
+        """host.launch arguments: no monitoring modules; the decider and the task's managed modules."""
+        monitoring = ('merger', 'local_mapcell_manager', 'global_goal_manager', 'mfg', 'kestrel_driver')
+        out = [a for a in args if a.split(':=')[0] not in monitoring]
+        out += [f'{m}:=false' for m in monitoring]
+        return out + ['migration_modules:=' + json.dumps(self.modules), 'decider:=true',
+                      f'training_dir:={self.training_dir}', f'control_values:={self.control_values}']
+
+
 class TwoHostMission:
     """Brings up the testbed, the two masters and the three launches; waits for the mission monitor."""
 
     def __init__(self, ws_config: str, scenario_file: str, map_file: str, start: List[str], placement: Placement,
                  report_dir: str, port: int, link: Dict[str, float], trace: Optional[str],
-                 link_map: Optional[str], migration: bool = False, rule: bool = False) -> None:
+                 link_map: Optional[str], migration: bool = False, rule: bool = False,
+                 task: Optional[TaskMode] = None) -> None:
         self.config = ws_config
         self.scenario_file, self.map_file, self.start = scenario_file, map_file, start
-        self.migration = migration or rule
+        self.task = task
+        self.migration = migration or rule or task is not None
         self.rule = rule
         if self.migration:
             from migration_manager.core.config import from_section
             self.migration_cfg = from_section(Section.from_file(os.path.join(ws_config, 'migration.yaml')))
-            placement = placement.managed_by(self.migration_cfg.modules)
+            placement = placement.managed_by(task.modules if task else self.migration_cfg.modules)
         self.placement = placement
         self.report_dir = report_dir
         self.log_dir = os.path.join(report_dir, 'logs')
@@ -184,8 +207,9 @@ class TwoHostMission:
                                            f'battery_interface:={self.testbed.cfg.robot_dev}',
                                            'relay_status_topic:=' + ('/store_forward_sender/status'
                                                                      if self.placement.relayed() else ''),
-                                           f'relay_drain_timeout:={self.relay_drain_timeout}'],
-                     until='mission_monitor')
+                                           f'relay_drain_timeout:={self.relay_drain_timeout}',
+                                           *(self.task.world_args(self.testbed.config_path) if self.task else [])],
+                     until='task_runner' if self.task else 'mission_monitor')
         for side, peer in ((self.robot, self.cloud), (self.cloud, self.robot)):
             store = f'store_{side.side}.tsv' if self.migration else 'store.tsv'
             host_args = ['cnr_mission', 'host.launch', f'host:={side.side}', *common,
@@ -209,6 +233,8 @@ class TwoHostMission:
                 host_args.append('kestrel_driver:=true')
             elif self.placement.host('move_base') == 'cloud' or 'move_base' in self.placement.managed:
                 host_args.append('map_server:=true')
+            if self.task:
+                host_args = self.task.host_args(host_args)
             self._launch(side, f'host_{side.side}', host_args,
                          prefix=self._robot_cpu() if side.side == 'robot' else None)
         tb_cli = [sys.executable, '-m', 'cnr_testbed.cli', '--config', self.testbed.config_path]
@@ -379,7 +405,30 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
                     'migration_manager (start where --placement says, move at run time)')
     ap.add_argument('--rule', action='store_true', help='--migration, and migration_rule moves modules by the link '
                     'quality (config/migration.yaml rule)')
+    task = ap.add_argument_group('task mode (exp_control.sh, exp_campaign.sh)')
+    task.add_argument('--task-plan', help='run this plan of tasks (cnr_mission.core.task) instead of the mission')
+    task.add_argument('--task-results', help='results TSV the runs are appended to (resumes after its last run)')
+    task.add_argument('--training-dir', default='', help="the decider's training sets ('' = config/decision.yaml's)")
+    task.add_argument('--control-values', default='', help="the tasks' control values ('' = config/decision.yaml's)")
     return ap.parse_args(argv)
+
+
+def task_mode(args: argparse.Namespace) -> Optional[TaskMode]:
+    """The task mode of ``--task-plan`` (ConfigError for a bad plan or task)."""
+    if not args.task_plan:
+        return None
+    from cnr_mission.core.task import load_plan
+    from network_monitor.core.decision_config import load_decision_config
+    if not args.task_results:
+        raise ConfigError('two_host_mission', '--task-results', 'required with --task-plan')
+    plan = load_plan(args.task_plan)
+    cfg = load_decision_config(os.path.join(args.config_dir, 'decision.yaml'))
+    if plan.task not in cfg.tasks:
+        raise ConfigError(args.task_plan, 'task', f'{plan.task!r} is not a task of config/decision.yaml '
+                                                  f'({", ".join(cfg.tasks)})')
+    return TaskMode(os.path.abspath(args.task_plan), os.path.abspath(args.task_results), list(cfg.tasks[plan.task]),
+                    os.path.abspath(args.training_dir) if args.training_dir else '',
+                    os.path.abspath(args.control_values) if args.control_values else '')
 
 
 def main(argv: Optional[List[str]] = None) -> int:
@@ -401,7 +450,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         return EXIT_CONFIG
     try:
         mission = TwoHostMission(args.config_dir, args.scenario, args.map, args.start, placement, args.report_dir,
-                                 args.port, link, args.trace, args.link_map, args.migration, args.rule)
+                                 args.port, link, args.trace, args.link_map, args.migration, args.rule,
+                                 task_mode(args))
     except ConfigError as exc:
         print(f'two_host_mission: {exc}', file=sys.stderr)
         return EXIT_CONFIG
@@ -426,7 +476,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         finally:
             signal.signal(signal.SIGINT, signal.SIG_DFL)
             signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    if status in (0, EXIT_NOT_FOUND):
+    if status in (0, EXIT_NOT_FOUND) and mission.task is None:
         amend_summary(args.report_dir, dict(
             two_host=dict(placement=placement.name, hosts=placement.as_dict(), migration=mission.migration, rule=args.rule,
                           managed=list(mission.placement.managed),

@@ -10,7 +10,8 @@ One header line, then one row per evaluated run, tab-separated, in this order (T
     t_task          task time [s], finite, >= 0
     timestamp       when the task started [unix s]; ISO 8601 with a UTC offset is accepted when reading
     task, location  the ⟨task, location⟩ (the file's name)
-    placement       what was placed where, e.g. ``mfg=cloud,global_goal_manager=cloud``
+    placement       what was placed where, e.g. ``mfg=cloud,global_goal_manager=cloud``; a module moved during
+                    the task lists its hosts in turn: ``move_base=cloud>robot``
     rtt_spread      interquartile range of the RTT [s], >= 0, or nan (unknown)
     loss            ping loss [0..1] or nan
     profile_method  how A_bw was known: probe | passive
@@ -58,7 +59,8 @@ HEADER = '\t'.join(COLUMNS)
 SUFFIX = '.tsv'
 
 _NAME = re.compile(r'^[A-Za-z0-9_.-]+$')                                # task, location, robot, module, host
-_PLACEMENT = re.compile(r'^([A-Za-z0-9_.-]+=[A-Za-z0-9_.-]+(,[A-Za-z0-9_.-]+=[A-Za-z0-9_.-]+)*)?$')
+_HOSTS = r'[A-Za-z0-9_.-]+(>[A-Za-z0-9_.-]+)*'                          # a host, or hosts in turn
+_PLACEMENT = re.compile(rf'^([A-Za-z0-9_.-]+={_HOSTS}(,[A-Za-z0-9_.-]+={_HOSTS})*)?$')
 
 
 class TrainingFileError(ValueError):

@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# exp_control.sh — the control experiment of thesis Table 4-5 (issue 12): --runs runs (default 20) of the task
+# (default corridor_round_trip@corridor: config/scenarios/corridor.yaml tasks) on the two-host testbed with every
+# module on the robot and no decision; CT (task time) and CB (battery fraction) as mean and sd of the completed
+# runs are written to config/control_values.yaml (Eq. 4-5's control values) and printed beside the thesis's
+# CT 87.9286 s (sd 14.3815), CB 0.004586 (sd 0.000702). Needs root; uses the default testbed (robot/cloud
+# namespaces). Rows go to bench_results/control/results.tsv as measured; run it again to resume.
+#
+#   launch_scripts/exp_control.sh [--runs 20] [--task T] [--location L] [--out DIR] [--control-values FILE]
+#                                 [--settle 6] [--port 11411]
+set -euo pipefail
+source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
+case "${1:-}" in -h|--help) cnr_help; exit 0 ;; esac
+[ "$(id -u)" = 0 ] || cnr_die "needs root (the testbed's network namespaces and TUN devices)"
+"$CNR_WS/launch_scripts/setup.sh" --no-install >/dev/null
+cnr_source_ws
+exec /usr/bin/python3 -m cnr_benchmarks.campaign control "$@"

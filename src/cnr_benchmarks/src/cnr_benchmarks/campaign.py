@@ -1,0 +1,155 @@
+"""The control experiment (exp_control.sh) and the continuous experiment (exp_campaign.sh) of thesis §5 (root).
+
+    /usr/bin/python3 -m cnr_benchmarks.campaign control [--runs 20] [--out bench_results/control]
+    /usr/bin/python3 -m cnr_benchmarks.campaign campaign [--conditions 100] [--seed 1] [--out bench_results/campaign]
+    /usr/bin/python3 -m cnr_benchmarks.campaign analyse [--out bench_results/campaign]
+
+Both run the two-host testbed in task mode (``two_host_mission --task-plan``): one session, the task_runner
+runs the plan's tasks one after the other (config/scenarios/<location>.yaml ``tasks``), move_base managed by
+migration_manager and placed by network_monitor's migration_decider. Rows are appended as measured; running the
+same command again resumes after the last finished run.
+
+``control``: every module on the robot, no decision; CT/CB (mean, sd of the completed runs) are written to
+config/control_values.yaml (or ``--control-values``) and printed beside the thesis's Table 4-5.
+
+``campaign``: ``--conditions`` link conditions drawn with ``--seed`` (cnr_benchmarks.core.campaign), each run
+as the robot decides and then with the other placement; the robot's training set starts empty in
+``<out>/training`` (cold start, exploration, k-NN as it learns). Then ``analyse``: the learning curve against
+the oracle beside the best static threshold, and Figures 5-1 to 5-6 in ``<out>/``, with campaign.md.
+"""
+from __future__ import annotations
+
+import argparse
+import datetime
+import math
+import os
+import statistics
+import subprocess
+import sys
+import time
+from typing import Dict, List, Optional
+
+import yaml
+
+from cnr_benchmarks import report
+from cnr_benchmarks.core import campaign as core
+
+THESIS_CT, THESIS_CT_SD = 87.9286, 14.3815          # s, Table 4-5
+THESIS_CB, THESIS_CB_SD = 0.004586, 0.000702        # battery fraction, Table 4-5
+
+
+def run_session(args: argparse.Namespace, plan: Dict, results: str, training_dir: str, control_values: str) -> int:
+    """Write the plan and run the two-host task session over it (its output passes through)."""
+    os.makedirs(args.out, exist_ok=True)
+    plan_path = os.path.join(args.out, 'plan.yaml')
+    with open(plan_path, 'w') as f:
+        yaml.safe_dump(plan, f, sort_keys=False)
+    cfg_dir = os.path.join(report.WS, 'config')
+    scenario = os.path.join(cfg_dir, 'scenarios', f'{plan["location"]}.yaml')
+    line = subprocess.run(['rosrun', 'cnr_mission', 'check_scenario', scenario], capture_output=True, text=True)
+    if line.returncode != 0:
+        print(line.stderr.strip(), file=sys.stderr)
+        return 2
+    _name, map_file, x, y, a = line.stdout.split()
+    session = os.path.join(args.out, 'session')
+    if os.path.exists(session):
+        os.replace(session, f'{session}.prev{int(time.time())}')
+    argv = ['rosrun', 'cnr_mission', 'two_host_mission', '--config-dir', cfg_dir, '--scenario', scenario,
+            '--map', map_file, '--start', x, y, a, '--placement', 'all_robot', '--report-dir', session,
+            '--port', str(args.port), '--task-plan', plan_path, '--task-results', results,
+            '--training-dir', training_dir, '--control-values', control_values]
+    report.progress(f'[campaign] {len(plan["runs"])} runs of {plan["task"]}@{plan["location"]}; rows in {results}')
+    return subprocess.call(argv)
+
+
+# ---------------------------------------------------------------- control (Table 4-5)
+def control(args: argparse.Namespace) -> int:
+    from cnr_mission.core.task import COMPLETED, read_results
+    from network_monitor.core.evaluation import ControlValues, write_control_values
+    results = os.path.join(args.out, 'results.tsv')
+    plan = core.control_plan(args.task, args.location, args.settle, args.runs)
+    rc = run_session(args, plan, results, os.path.join(args.out, 'training'), args.control_values)
+    rows, _ = read_results(results)
+    done = [r for r in rows if r['mission_status'] == COMPLETED]
+    report.progress(f'[control] {len(rows)} runs, {len(done)} completed')
+    if len(done) < 2:
+        print('exp_control: fewer than 2 completed runs: no control values written', file=sys.stderr)
+        return rc or 1
+    t = [float(r['t_task']) for r in done]
+    b = [float(r['b_task']) for r in done]
+    values = ControlValues(task=args.task, ct_mean=statistics.mean(t), ct_std=statistics.stdev(t),
+                           cb_mean=statistics.mean(b), cb_std=statistics.stdev(b), runs=len(done),
+                           date=datetime.datetime.now(datetime.timezone.utc).isoformat(timespec='seconds'),
+                           command='launch_scripts/exp_control.sh ' + ' '.join(args.argv))
+    write_control_values(args.control_values, values)
+    table = report.markdown_table(
+        ['', 'runs', 'CT [s] mean (sd)', 'CB [fraction] mean (sd)'],
+        [['thesis Table 4-5 (88 s corridor round trip)', 20, f'{THESIS_CT:.4f} ({THESIS_CT_SD:.4f})',
+          f'{THESIS_CB:.6f} ({THESIS_CB_SD:.6f})'],
+         [f'measured ({args.task}@{args.location})', len(done), f'{values.ct_mean:.2f} ({values.ct_std:.2f})',
+          f'{values.cb_mean:.6f} ({values.cb_std:.6f})']])
+    text = (f'# Control values (thesis Table 4-5)\n\n`{values.command}` ({values.date}); every module on the '
+            f'robot, {len(rows)} runs, {len(done)} completed. Written to `{args.control_values}`.\n\n{table}\n')
+    report.write_text(os.path.join(args.out, 'control.md'), text)
+    print(text, flush=True)
+    return rc
+
+
+# ---------------------------------------------------------------- campaign
+def campaign(args: argparse.Namespace) -> int:
+    ranges = core.Ranges(args.rtt_min, args.rtt_max, args.rate_min, args.rate_max, args.loss_min, args.loss_max)
+    conditions = core.draw_conditions(args.conditions, args.seed, ranges)
+    plan = core.plan_document(args.task, args.location, args.settle, conditions)
+    plan['seed'] = args.seed
+    results = os.path.join(args.out, 'results.tsv')
+    t0 = time.monotonic()
+    rc = run_session(args, plan, results, os.path.join(args.out, 'training'), args.control_values)
+    report.progress(f'[campaign] session ended with status {rc} after {(time.monotonic() - t0) / 60:.1f} min')
+    return analyse(args) or rc
+
+
+def analyse(args: argparse.Namespace) -> int:
+    from cnr_benchmarks.campaign_figures import write_analysis
+    return write_analysis(args)
+
+
+def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(prog='campaign', description=__doc__.split('\n')[0])
+    sub = ap.add_subparsers(dest='cmd', required=True)
+    for name in ('control', 'campaign', 'analyse'):
+        p = sub.add_parser(name)
+        p.add_argument('--task', default='corridor_round_trip', help='a task of config/decision.yaml')
+        p.add_argument('--location', default='corridor', help='config/scenarios/<location>.yaml')
+        p.add_argument('--out', default=os.path.join(report.WS, 'bench_results', 'control' if name == 'control'
+                                                     else 'campaign'))
+        p.add_argument('--port', type=int, default=11411, help='master port in both namespaces')
+        p.add_argument('--settle', type=float, default=6.0,
+                       help='s after setting a link before profiling (the network monitor window is 5 s)')
+        p.add_argument('--control-values', default=os.path.join(report.WS, 'config', 'control_values.yaml'))
+        if name == 'control':
+            p.add_argument('--runs', type=int, default=20)
+        else:
+            p.add_argument('--conditions', type=int, default=100)
+            p.add_argument('--seed', type=int, default=1)
+            p.add_argument('--test-fraction', type=float, default=0.3, help='conditions held out (the last ones)')
+            for k, v in (('rtt-min', 0.0), ('rtt-max', 200.0), ('rate-min', 0.5), ('rate-max', 50.0),
+                         ('loss-min', 0.0), ('loss-max', 0.05)):
+                p.add_argument(f'--{k}', type=float, default=v)
+    args = ap.parse_args(argv)
+    args.argv = list(argv if argv is not None else sys.argv[1:])
+    args.out = os.path.abspath(args.out)
+    if getattr(args, 'runs', 2) < 2 or getattr(args, 'conditions', 1) < 1:
+        ap.error('--runs must be >= 2 and --conditions >= 1')
+    return args
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    args = parse_args(argv)
+    if args.cmd != 'analyse' and os.geteuid() != 0:
+        print('campaign: needs root (the testbed\'s network namespaces and TUN devices)', file=sys.stderr)
+        return 2
+    return {'control': control, 'campaign': campaign, 'analyse': analyse}[args.cmd](args)
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,243 @@
+"""The campaign's analysis: oracle accuracy, learning curve and Figures 5-1 to 5-6 beside the thesis's numbers
+(``campaign analyse``; cnr_benchmarks.core.campaign has the computations). Writes into ``--out``:
+learning_curve.tsv, fig5_1_decision_map.png ... fig5_6_time.png and campaign.md."""
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import statistics
+import sys
+from typing import Dict, List, Sequence
+
+import matplotlib
+
+matplotlib.use('Agg')
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+from cnr_benchmarks import report  # noqa: E402
+from cnr_benchmarks.core import campaign as core  # noqa: E402
+
+
+def _num(row: Dict[str, str], key: str) -> float:
+    try:
+        return float(row[key])
+    except (KeyError, ValueError):
+        return math.nan
+
+
+def _fmt(x: float, digits: int = 1) -> str:
+    return '–' if not math.isfinite(x) else f'{x:.{digits}f}'
+
+
+def write_analysis(args: argparse.Namespace) -> int:
+    from cnr_mission.core.task import COMPLETED, read_results
+    from cnr_params import ConfigError
+    from network_monitor.core.decision_config import load_decision_config
+    from network_monitor.core.evaluation import OFFLOAD, ONLOAD, load_control_values
+    from network_monitor.core.training import TrainingSet
+    results = os.path.join(args.out, 'results.tsv')
+    rows, warnings = read_results(results)
+    for w in warnings:
+        print(w, file=sys.stderr)
+    if not rows:
+        print(f'campaign analyse: no results in {results}', file=sys.stderr)
+        return 1
+    cfg = load_decision_config(os.path.join(report.WS, 'config', 'decision.yaml'))
+    try:
+        control = load_control_values(args.control_values, args.task)
+    except ConfigError as exc:
+        print(f'campaign analyse: {exc}', file=sys.stderr)
+        return 2
+    training, tw = TrainingSet(os.path.join(args.out, 'training'), args.task, args.location).read()
+    pairs = core.pairs(rows)
+    oracle = [core.oracle(p, control) for p in pairs]
+    n_test = int(round(len(pairs) * args.test_fraction))
+    n_train = len(pairs) - n_test
+    train_ids = {p.condition for p in pairs[:n_train]}
+    # the rows learned during the training conditions: each row's timestamp falls in its run's wall-clock span
+    spans = [(_num(r, 'wall_start'), _num(r, 'wall_start') + _num(r, 'wall_time'), r['condition']) for r in rows]
+
+    def condition_of(t: float) -> str:
+        return next((c for a, b, c in spans if a <= t <= b + 1.0), '')
+    learned = [t for t in training if t.source == 'local']
+    train_rows = [t for t in learned if condition_of(t.timestamp) in train_ids]
+    curve = core.learning_curve(train_rows, n_train, pairs[n_train:], oracle[n_train:], cfg.decision)
+    with open(os.path.join(args.out, 'learning_curve.tsv'), 'w') as f:
+        f.write('rows\tknn\tstatic\trule_rtt\trule_r_bw\theld_out\ttrain_conditions\n')
+        for c in curve:
+            f.write('\t'.join(str(c[k]) for k in ('rows', 'knn', 'static', 'rule_rtt', 'rule_r_bw', 'held_out',
+                                                   'train_conditions')) + '\n')
+    online = sum(1 for p, o in zip(pairs, oracle) if p.decided == o)
+    online_late = sum(1 for p, o in zip(pairs[n_train:], oracle[n_train:]) if p.decided == o)
+    offload_rows = [r for r in rows if r['decision'] == OFFLOAD]
+    onload_rows = [r for r in rows if r['decision'] == ONLOAD]
+
+    # ---- Fig. 5-1: the k-NN decision map over (RTT, R_bw) with the rows
+    from network_monitor.core.decision import Decider, DecisionSettings, Exploration
+    s = cfg.decision
+    final = Decider(DecisionSettings(s.k, s.normalisation, s.cold_start, Exploration(0.0, s.exploration.max_rtt, 0)),
+                    learned)
+    rtt_axis = np.linspace(0.0, 0.25, 120)
+    rbw_axis = np.logspace(-0.5, 3.0, 120)
+    grid = np.array([[1.0 if final.policy(x, y).decision == OFFLOAD else 0.0 for x in rtt_axis] for y in rbw_axis])
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    ax.pcolormesh(rtt_axis * 1000, rbw_axis, grid, cmap='coolwarm_r', alpha=0.25, shading='auto', vmin=0, vmax=1)
+    for label, colour in ((OFFLOAD, 'tab:blue'), (ONLOAD, 'tab:red')):
+        pts = [(t.c_l * 1000, t.r_bw) for t in learned if t.label == label]
+        if pts:
+            ax.scatter(*zip(*pts), s=14, c=colour, label=f'label {label}')
+    ax.set_yscale('log')
+    ax.set_xlabel('C_l: RTT before the task [ms]')
+    ax.set_ylabel('R_bw = A_bw / C_bw')
+    ax.set_title(f'Fig. 5-1: k-NN (k = {s.k}) decision map, {len(learned)} rows\n'
+                 '(shaded blue: offload, red: onload)')
+    ax.legend(loc='lower left', fontsize=8)
+    fig.tight_layout()
+    fig.savefig(os.path.join(args.out, 'fig5_1_decision_map.png'), dpi=110)
+    plt.close(fig)
+
+    # ---- Fig. 5-2: T_task vs R_bw (offloaded, completed), power fit, crossing with CT
+    done_off = [r for r in offload_rows if r['mission_status'] == COMPLETED]
+    x = [_num(r, 'r_bw') for r in done_off]
+    y = [_num(r, 't_task') for r in done_off]
+    placing = [_num(r, 'placing_time') for r in offload_rows if _num(r, 'placing_time') > 0]
+    migration_time = statistics.median(placing) if placing else math.nan
+    fit = core.power_fit(x, y)
+    cross = core.crossing(fit, control.ct_mean) if fit else math.nan
+    cross_mig = core.crossing(fit, control.ct_mean - migration_time) if fit and math.isfinite(migration_time) \
+        else math.nan
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    ax.scatter(x, y, s=14, label='offloaded runs (completed)')
+    ax.axhline(control.ct_mean, color='k', ls='--', label=f'CT = {control.ct_mean:.1f} s (all local)')
+    if fit:
+        xs = np.logspace(math.log10(max(min(x), 1e-3)), math.log10(max(x)), 100)
+        ax.plot(xs, fit[0] * xs ** fit[1], 'tab:orange', label=f'T = {fit[0]:.1f} R_bw^{fit[1]:.3f}')
+    ax.set_xscale('log')
+    ax.set_xlabel('R_bw')
+    ax.set_ylabel('T_task [s]')
+    ax.set_title(f'Fig. 5-2: task time vs R_bw (crossing with CT: {_fmt(cross, 2)}; '
+                 f'with the measured migration {_fmt(migration_time)} s: {_fmt(cross_mig, 2)})', fontsize=8)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(os.path.join(args.out, 'fig5_2_time_vs_rbw.png'), dpi=110)
+    plt.close(fig)
+
+    # ---- Fig. 5-3: operating time (a full battery's worth of such tasks) vs R_bw
+    def op_hours(r: Dict[str, str]) -> float:
+        b = _num(r, 'b_task')
+        return _num(r, 't_task') / b / 3600.0 if b > 0 else math.nan
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    ax.scatter([_num(r, 'r_bw') for r in done_off], [op_hours(r) for r in done_off], s=14, label='offloaded')
+    local_op = control.ct_mean / control.cb_mean / 3600.0
+    ax.axhline(local_op, color='k', ls='--', label=f'all local: {local_op:.2f} h')
+    ax.set_xscale('log')
+    ax.set_xlabel('R_bw')
+    ax.set_ylabel('operating time on a full battery [h] (T_task / B_task)')
+    ax.set_title('Fig. 5-3: operating time vs R_bw')
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(os.path.join(args.out, 'fig5_3_operating_time.png'), dpi=110)
+    plt.close(fig)
+
+    # ---- Fig. 5-4: T_task vs RTT (offloaded), linear fit, crossing with CT; failure RTT
+    xr = [_num(r, 'c_l') * 1000 for r in done_off]
+    lin = core.linear_fit(xr, y)
+    cross_rtt = (control.ct_mean - lin[0]) / lin[1] if lin and lin[1] > 0 else math.nan
+    fail_rtt = core.failure_rtt([(_num(r, 'rtt_ms'), r['mission_status']) for r in offload_rows])
+    failed = [r for r in offload_rows if r['mission_status'] != COMPLETED]
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    ax.scatter(xr, y, s=14, label='offloaded, completed')
+    if failed:
+        ax.scatter([_num(r, 'c_l') * 1000 for r in failed], [_num(r, 't_task') for r in failed], s=18, marker='x',
+                   c='tab:red', label='offloaded, not completed')
+    ax.axhline(control.ct_mean, color='k', ls='--', label=f'CT = {control.ct_mean:.1f} s')
+    if lin:
+        xs = np.linspace(0, max(xr + [1.0]), 50)
+        ax.plot(xs, lin[0] + lin[1] * xs, 'tab:orange', label=f'T = {lin[0]:.1f} + {lin[1]:.3f} RTT')
+    ax.set_xlabel('C_l: RTT [ms]')
+    ax.set_ylabel('T_task [s]')
+    ax.set_title(f'Fig. 5-4: task time vs RTT (crossing with CT {_fmt(cross_rtt)} ms; remote move_base fails '
+                 f'from {_fmt(fail_rtt, 0)} ms)', fontsize=8)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(os.path.join(args.out, 'fig5_4_time_vs_rtt.png'), dpi=110)
+    plt.close(fig)
+
+    # ---- Fig. 5-5 / 5-6: battery and time, local vs remote, under good links (RTT < 40 ms, >= 10 Mbit/s)
+    good = [p for p in pairs if p.rtt_ms < 40 and p.rate >= 10 and p.offload.mission_status == COMPLETED
+            and p.onload.mission_status == COMPLETED]
+    b_local = [p.onload.b_task for p in good]
+    b_remote = [p.offload.b_task for p in good]
+    t_local = [p.onload.t_task for p in good]
+    t_remote = [p.offload.t_task for p in good]
+    for name, loc, rem, unit, title in (('fig5_5_battery.png', b_local, b_remote, 'battery used [fraction]',
+                                         'Fig. 5-5: battery, local vs remote move_base'),
+                                        ('fig5_6_time.png', t_local, t_remote, 'T_task [s]',
+                                         'Fig. 5-6: task time, local vs remote move_base')):
+        fig, ax = plt.subplots(figsize=(6.4, 4.8))
+        if loc:
+            ax.plot(range(1, len(loc) + 1), loc, 'o-', label='local (onload)')
+            ax.plot(range(1, len(rem) + 1), rem, 's-', label='remote (offload)')
+        ax.set_xlabel('paired condition (RTT < 40 ms, rate >= 10 Mbit/s)')
+        ax.set_ylabel(unit)
+        ax.set_title(title)
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(os.path.join(args.out, name), dpi=110)
+        plt.close(fig)
+
+    def mean(v: Sequence[float]) -> float:
+        v = [a for a in v if math.isfinite(a)]
+        return statistics.mean(v) if v else math.nan
+    db = 100.0 * (mean(b_remote) - mean(b_local)) / mean(b_local) if b_local else math.nan
+    dt = mean(t_remote) - mean(t_local) if t_local else math.nan
+
+    # ---- campaign.md
+    last = curve[-1] if curve else None
+    within = [c for c in curve if c['rows'] <= 40]
+    at40 = within[-1] if within else None
+    statuses = {}
+    for r in rows:
+        statuses[(r['decision'], r['mission_status'])] = statuses.get((r['decision'], r['mission_status']), 0) + 1
+    wall = sum(_num(r, 'wall_time') for r in rows if math.isfinite(_num(r, 'wall_time')))
+    lines = [
+        f'# Continuous experiment (thesis §5)\n',
+        f'`launch_scripts/exp_campaign.sh {" ".join(args.argv)}`: {len(rows)} runs, {len(pairs)} paired conditions '
+        f'({n_train} training, {n_test} held out), {wall / 3600:.2f} h of runs; control values: CT '
+        f'{control.ct_mean:.2f} s, CB {control.cb_mean:.6f} ({control.runs} runs, {control.date}).\n',
+        'Runs by placement and status: ' + ', '.join(f'{d} {s}: {n}' for (d, s), n in sorted(statuses.items()))
+        + '\n',
+        '| measure | thesis | measured |', '|---|---|---|',
+        f'| decisions equal to the oracle, all conditions (online, as learned) | – | {online}/{len(pairs)} '
+        f'({_fmt(100 * online / max(len(pairs), 1), 0)} %) |',
+        f'| same, held-out conditions only | – | {online_late}/{n_test} '
+        f'({_fmt(100 * online_late / max(n_test, 1), 0)} %) |',
+        f'| k-NN accuracy on held-out, all {last["rows"] if last else 0} training rows | Eom et al. 87.5 % | '
+        f'{_fmt(100 * last["knn"], 0) if last else "–"} % |',
+        f'| k-NN accuracy with ≤ 40 rows | goal ≥ 90 % | {_fmt(100 * at40["knn"], 0) if at40 else "–"} % '
+        f'({at40["rows"] if at40 else 0} rows) |',
+        f'| best static threshold, same rows | MALMOS: k-NN +10.9–40.5 points | '
+        f'{_fmt(100 * last["static"], 0) if last else "–"} % (RTT < {_fmt(1000 * last["rule_rtt"], 0) if last else "–"} '
+        f'ms, R_bw > {_fmt(last["rule_r_bw"], 2) if last else "–"}) |',
+        f'| Fig. 5-2: R_bw where offloading matches CT | ≈ 4.9 | {_fmt(cross, 2)} |',
+        f'| same, with the measured migration time ({_fmt(migration_time)} s, median placing time) | ≈ 10 (5 s) | '
+        f'{_fmt(cross_mig, 2)} |',
+        f'| Fig. 5-4: RTT where offloading matches CT | ≈ 55 ms | {_fmt(cross_rtt)} ms |',
+        f'| RTT from which remote move_base fails | ≈ 160 ms | {_fmt(fail_rtt, 0)} ms |',
+        f'| Fig. 5-5: battery, remote vs local (good links, {len(good)} pairs) | −10 % | {_fmt(db)} % |',
+        f'| Fig. 5-6: task time, remote − local | −2.4 s | {_fmt(dt)} s |',
+        '',
+        'Learning curve (learning_curve.tsv): ' + ', '.join(
+            f'{c["rows"]} rows: k-NN {100 * c["knn"]:.0f} % / static {100 * c["static"]:.0f} %' for c in curve),
+        '',
+        'Figures: fig5_1_decision_map.png, fig5_2_time_vs_rbw.png, fig5_3_operating_time.png, '
+        'fig5_4_time_vs_rtt.png, fig5_5_battery.png, fig5_6_time.png.',
+    ]
+    if tw:
+        lines.append('\nTraining set warnings: ' + '; '.join(tw))
+    text = '\n'.join(lines) + '\n'
+    report.write_text(os.path.join(args.out, 'campaign.md'), text)
+    print(text, flush=True)
+    return 0

@@ -1,0 +1,199 @@
+"""Tasks the network-aware decision is made for (thesis §3.4.1, §4.2.3), and run plans of many of them (no ROS).
+
+A task is a fixed piece of work with a start and an end, measured by its time T_task and the battery it used
+B_task. Its definition lives in the location's scenario file (config/scenarios/<location>.yaml, ``tasks``)::
+
+    tasks:
+      corridor_round_trip:               # the thesis's task: to the end of the corridor and back
+        start: [0.5, 0.0, 0.0]           # m, m, rad: the robot is put here before each run
+        goals: [[6.0, 0.0, 0.0], [0.5, 0.0, 3.14159]]   # move_base goals in the map frame, in order
+        goal_timeout: 90.0               # s of sim time per goal before the task counts as timed out
+
+Mission status (the thesis never defines it; :func:`mission_status`): ``completed`` when move_base reached
+every goal; ``aborted`` when move_base gave up on one (ABORTED/REJECTED/LOST, or its action server was gone
+for longer than the runner's ``server_timeout``); ``timed_out`` when a goal took longer than ``goal_timeout``.
+
+A *plan* (YAML) lists runs for the ``task_runner`` node; each has an id, the link to set before it (optional),
+and what to decide (``force``: '' = the migration_decider decides, offload | onload = that placement;
+``other`` = the other placement than the previous run of the same condition ran, for paired runs;
+``decide: false`` = no decider at all, e.g. the control runs). Results are appended to a TSV, one row per run,
+so a plan that was interrupted resumes after its last finished run (:func:`read_results`).
+"""
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+from typing import Dict, List, Optional, Sequence, Set, Tuple
+
+from cnr_params import ConfigError, Section
+
+OTHER = 'other'             # force: the other placement than the previous run of the same condition (paired runs)
+FORCE = ('', 'offload', 'onload', OTHER)
+COMPLETED, ABORTED, TIMED_OUT = 'completed', 'aborted', 'timed_out'
+SUCCEEDED, GAVE_UP, TOO_LONG = 'succeeded', 'gave_up', 'too_long'       # one goal's outcome
+
+
+@dataclass(frozen=True)
+class TaskSpec:
+    name: str
+    start: Tuple[float, float, float]
+    goals: Tuple[Tuple[float, float, float], ...]
+    goal_timeout: float
+
+
+def _pose(s: Section, key: str, value) -> Tuple[float, float, float]:
+    if not (isinstance(value, (list, tuple)) and len(value) == 3 and
+            all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)):
+        raise s.error(key, f'expected [x, y, yaw] (m, m, rad), got {value!r}')
+    return float(value[0]), float(value[1]), float(value[2])
+
+
+def load_task(scenario: Section, name: str) -> TaskSpec:
+    """The task ``name`` of a scenario file's ``tasks`` section (ConfigError naming the file and field)."""
+    tasks = scenario.section('tasks')
+    if name not in tasks:
+        raise tasks.error(name, f'no such task (defined: {", ".join(map(str, tasks.keys())) or "none"})')
+    t = tasks.section(name)
+    goals = t.raw('goals')
+    if not isinstance(goals, list) or not goals:
+        raise t.error('goals', f'expected a non-empty list of [x, y, yaw], got {goals!r}')
+    return TaskSpec(name=name, start=_pose(t, 'start', t.raw('start')),
+                    goals=tuple(_pose(t, f'goals[{i}]', g) for i, g in enumerate(goals)),
+                    goal_timeout=t.number('goal_timeout', positive=True))
+
+
+def mission_status(outcomes: Sequence[str], goals: int) -> str:
+    """The task's status from its goals' outcomes (module docstring)."""
+    for o in outcomes:
+        if o == GAVE_UP:
+            return ABORTED
+        if o == TOO_LONG:
+            return TIMED_OUT
+        if o != SUCCEEDED:
+            raise ValueError(f'unknown goal outcome {o!r}')
+    return COMPLETED if len(outcomes) == goals else ABORTED
+
+
+def battery_used(percentage_before: float, percentage_after: float) -> float:
+    """B_task: the fraction of a full battery used, from two battery_state percentages (0..100)."""
+    return (percentage_before - percentage_after) / 100.0
+
+
+# ---------------------------------------------------------------- plans
+@dataclass(frozen=True)
+class Link:
+    delay: float            # one-way delay per direction [ms]
+    rate: float             # per direction [Mbit/s], 0 = unlimited
+    loss: float             # per direction [0..1]
+
+    @property
+    def rtt_ms(self) -> float:
+        return 2.0 * self.delay
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    id: str
+    condition: str          # runs of one condition share it (paired runs)
+    link: Optional[Link]    # None: leave the link as it is
+    force: str              # '' | offload | onload | other
+    decide: bool            # ask the migration_decider (False: run as placed, no evaluation)
+    learn: bool             # the decider appends the evaluated row to the training set
+
+
+@dataclass(frozen=True)
+class Plan:
+    task: str
+    location: str
+    settle: float           # s after setting the link before profiling (the monitor's window fills)
+    runs: Tuple[RunSpec, ...]
+
+
+def _link(s: Section) -> Link:
+    return Link(delay=s.number('delay', nonnegative=True), rate=s.number('rate', nonnegative=True),
+                loss=s.number('loss', minimum=0.0, maximum=1.0))
+
+
+def load_plan(path: str) -> Plan:
+    """A plan file (module docstring); ConfigError naming the file and field."""
+    s = Section.from_file(path)
+    runs: List[RunSpec] = []
+    seen: Set[str] = set()
+    for i, r in enumerate(s.sections('runs')):
+        rid = r.string('id')
+        if not rid or '\t' in rid or rid in seen:
+            raise r.error('id', f'must be a unique non-empty name, got {rid!r}')
+        seen.add(rid)
+        force = r.string('force')
+        if force not in FORCE:
+            raise r.error('force', f"expected '', offload, onload or other, got {force!r}")
+        if force == OTHER and not any(x.condition == r.raw('condition', None) for x in runs):
+            raise r.error('force', 'other needs an earlier run of the same condition')
+        link = _link(r.section('link')) if r.raw('link', None) is not None else None
+        runs.append(RunSpec(id=rid, condition=r.string('condition'), link=link, force=force,
+                            decide=r.boolean('decide'), learn=r.boolean('learn')))
+    if not runs:
+        raise s.error('runs', 'expected at least one run')
+    return Plan(task=s.string('task'), location=s.string('location'), settle=s.number('settle', nonnegative=True),
+                runs=tuple(runs))
+
+
+RESULT_COLUMNS = ('id', 'condition', 'rtt_ms', 'rate_mbit', 'loss', 'force', 'decision', 'reason', 'policy',
+                  'confidence', 'votes_offload', 'c_l', 'r_bw', 'profile_method', 'placed', 'placing_time',
+                  'redecisions', 'placement', 'mission_status', 't_task', 'b_task', 'value', 'good', 'label',
+                  'learned', 'wall_start', 'wall_time')
+
+
+def _fmt(v) -> str:
+    if isinstance(v, bool):
+        return '1' if v else '0'
+    if isinstance(v, float):
+        return repr(v)
+    return str(v).replace('\t', ' ').replace('\n', ' ')
+
+
+def append_result(path: str, values: Dict) -> None:
+    """Append one run's row to the results TSV (header first if the file is new), flushed to disk. A file that
+    does not end with a newline (a torn last line) gets one first, so only that line is lost."""
+    new = not os.path.exists(path) or os.path.getsize(path) == 0
+    with open(path, 'a+b') as f:
+        if not new:
+            f.seek(-1, os.SEEK_END)
+            if f.read(1) != b'\n':
+                f.write(b'\n')
+        text = ('\t'.join(RESULT_COLUMNS) + '\n' if new else '') + \
+            '\t'.join(_fmt(values.get(c, '')) for c in RESULT_COLUMNS) + '\n'
+        f.write(text.encode())
+        f.flush()
+        os.fsync(f.fileno())
+
+
+def read_results(path: str) -> Tuple[List[Dict[str, str]], List[str]]:
+    """Rows of a results TSV as dicts of strings, and warnings (file:line) for lines that are not whole rows."""
+    if not os.path.exists(path):
+        return [], []
+    rows, warnings = [], []
+    with open(path, encoding='utf-8', errors='replace') as f:
+        lines = f.read().split('\n')
+    if not lines or lines[0].split('\t') != list(RESULT_COLUMNS):
+        raise ConfigError(path, 'header', 'not a task results file (unexpected header)')
+    for n, line in enumerate(lines[1:], start=2):
+        if not line:
+            continue
+        fields = line.split('\t')
+        if len(fields) != len(RESULT_COLUMNS):
+            warnings.append(f'{path}:{n}: {len(fields)} fields, expected {len(RESULT_COLUMNS)} (skipped)')
+            continue
+        rows.append(dict(zip(RESULT_COLUMNS, fields)))
+    return rows, warnings
+
+
+def resolve_force(force: str, previous: Optional[str]) -> str:
+    """The placement a run forces: ``other`` becomes the other one than ``previous`` (the decision of the
+    previous run of the same condition)."""
+    if force != OTHER:
+        return force
+    if previous not in ('offload', 'onload'):
+        raise ValueError(f'force other: the previous run of the condition has no decision ({previous!r})')
+    return 'onload' if previous == 'offload' else 'offload'

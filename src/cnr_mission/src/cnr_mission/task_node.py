@@ -1,0 +1,188 @@
+"""The ``task_runner`` node: runs a plan of tasks (thesis §3.4.1: "drive to the end of the corridor and back")
+one after the other, each under the link the plan sets, decided and evaluated by network_monitor's
+migration_decider (see :mod:`cnr_mission.core.task` and the package README).
+
+Per run: set the link (testbed emulator), let the network monitor's window fill (``settle``), put the robot at
+the task's start (the simulator's ``teleport``), ``~decide`` (profile, k-NN, placement), drive the goals with
+move_base's action, measure T_task (sim time) and B_task (battery_state), ``~evaluate``, append the row to
+the results file. A plan that was interrupted resumes after the last run with a row.
+
+Exit status: 0 every run done, 2 bad configuration, 1 anything else.
+"""
+from __future__ import annotations
+
+import math
+import os
+import time
+from typing import Dict, List, Optional
+
+import actionlib
+import rospy
+from actionlib_msgs.msg import GoalStatus, GoalStatusArray
+from geometry_msgs.msg import Pose2D
+from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
+from sensor_msgs.msg import BatteryState
+
+import cnr_params
+from cnr_mission.core.task import (GAVE_UP, SUCCEEDED, TOO_LONG, RunSpec, append_result, battery_used, load_plan,
+                                   load_task, mission_status, read_results, resolve_force)
+from cnr_msgs.msg import TaskDecision
+from cnr_msgs.srv import Decide, EvaluateTask, Teleport
+from cnr_navigation.goal_sequencer import wait_for_server
+from cnr_params import ConfigError, Section
+from cnr_params.ros import init_node, private_section
+
+FAILED_STATES = (GoalStatus.ABORTED, GoalStatus.REJECTED, GoalStatus.LOST, GoalStatus.RECALLED,
+                 GoalStatus.PREEMPTED)
+
+
+class TaskRunner:
+    def __init__(self) -> None:
+        p = private_section('~')
+        self.plan = load_plan(p.string('plan'))
+        self.spec = load_task(Section.from_file(p.string('scenario_file')), self.plan.task)
+        self.results = os.path.abspath(p.string('results'))
+        testbed = p.string('testbed_config')
+        self.testbed = None
+        if testbed:
+            from cnr_testbed.api import Testbed
+            self.testbed = Testbed(testbed)
+        self.server_timeout = p.number('server_timeout', positive=True)
+        self.decide_timeout = p.number('decide_timeout', positive=True)
+        decider = p.string('decider').rstrip('/')
+        self.decide = rospy.ServiceProxy(f'{decider}/decide', Decide)
+        self.evaluate = rospy.ServiceProxy(f'{decider}/evaluate', EvaluateTask)
+        self.teleport = rospy.ServiceProxy(p.string('teleport_service'), Teleport)
+        action = p.string('move_base_action').rstrip('/')
+        self.client = actionlib.SimpleActionClient(action, MoveBaseAction)
+        self.last_status = time.monotonic()         # wall time move_base's action status was last heard
+        rospy.Subscriber(f'{action}/status', GoalStatusArray, self._on_status, queue_size=2)
+        self.battery: Optional[BatteryState] = None
+        self.redecisions: List[TaskDecision] = []
+        rospy.Subscriber(p.string('battery_topic'), BatteryState, self._on_battery, queue_size=2)
+        rospy.Subscriber(f'{decider}/decisions', TaskDecision, self._on_decision, queue_size=20)
+
+    def _on_status(self, _msg: GoalStatusArray) -> None:
+        self.last_status = time.monotonic()
+
+    def _on_battery(self, msg: BatteryState) -> None:
+        self.battery = msg
+
+    def _on_decision(self, msg: TaskDecision) -> None:
+        if msg.event == 'redecided':
+            self.redecisions.append(msg)
+
+    @staticmethod
+    def say(text: str) -> None:
+        print(f'[task {rospy.Time.now().to_sec():7.1f} s] {text}', flush=True)
+
+    # ---------------------------------------------------------------- one run
+    def drive(self) -> List[str]:
+        """Each goal in turn; the outcomes (stops at the first that did not succeed)."""
+        outcomes: List[str] = []
+        for x, y, yaw in self.spec.goals:
+            goal = MoveBaseGoal()
+            goal.target_pose.header.frame_id = 'map'
+            goal.target_pose.header.stamp = rospy.Time.now()
+            goal.target_pose.pose.position.x, goal.target_pose.pose.position.y = x, y
+            o = goal.target_pose.pose.orientation
+            o.z, o.w = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
+            self.client.send_goal(goal)
+            t0 = rospy.Time.now().to_sec()
+            outcome = None
+            while outcome is None and not rospy.is_shutdown():
+                state = self.client.get_state()
+                if state == GoalStatus.SUCCEEDED:
+                    outcome = SUCCEEDED
+                elif state in FAILED_STATES:
+                    outcome = GAVE_UP
+                elif rospy.Time.now().to_sec() - t0 > self.spec.goal_timeout:
+                    outcome = TOO_LONG
+                elif time.monotonic() - self.last_status > self.server_timeout:
+                    outcome = GAVE_UP       # the action server gone (e.g. move_base on a cut-off cloud, no failover)
+                else:
+                    time.sleep(0.05)
+            if outcome != SUCCEEDED:
+                self.client.cancel_all_goals()
+            outcomes.append(outcome or GAVE_UP)
+            self.say(f'goal ({x:.1f}, {y:.1f}): {outcomes[-1]} after {rospy.Time.now().to_sec() - t0:.1f} s')
+            if outcome != SUCCEEDED:
+                break
+        return outcomes
+
+    def run(self, i: int, n: int, r: RunSpec) -> Dict:
+        force = resolve_force(r.force, self.decided.get(r.condition))
+        row: Dict = dict(id=r.id, condition=r.condition, force=force, wall_start=round(time.time(), 3))
+        w0 = time.monotonic()
+        if r.link is not None:
+            row.update(rtt_ms=r.link.rtt_ms, rate_mbit=r.link.rate, loss=r.link.loss)
+            if self.testbed is None:
+                raise ConfigError('task_runner', 'testbed_config', f'run {r.id} sets a link but no testbed is given')
+            self.testbed.set('both', delay=r.link.delay, rate=r.link.rate, loss=r.link.loss)
+        link = '' if r.link is None else \
+            f'RTT {r.link.rtt_ms:.0f} ms, {r.link.rate:g} Mbit/s, loss {100 * r.link.loss:.1f} %'
+        self.say(f'run {i}/{n} {r.id}: {link or "link as it is"}'
+                 + (f'; placement forced: {force}' if force else ''))
+        deadline = time.monotonic() + self.plan.settle
+        while time.monotonic() < deadline and not rospy.is_shutdown():     # the monitor's window fills
+            time.sleep(0.1)
+        sx, sy, sa = self.spec.start
+        res = self.teleport(Pose2D(sx, sy, sa), False)
+        if not res.success:
+            raise RuntimeError(f'could not put the robot at the start ({sx}, {sy}): {res.message}')
+        self.redecisions = []
+        if r.decide:
+            self.decide.wait_for_service(self.decide_timeout)
+            d = self.decide(self.plan.task, self.plan.location, force, True)
+            if not d.ok:
+                raise RuntimeError(f'the decider refused: {d.message}')
+            self.say(f'decision: {d.message}')
+            m = d.decision
+            self.decided[r.condition] = m.decision
+            row.update(decision=m.decision, reason=m.reason, policy=m.policy, confidence=m.confidence,
+                       votes_offload=m.votes_offload, c_l=m.c_l, r_bw=m.r_bw, profile_method=m.profile_method,
+                       placed=m.placed, placing_time=m.placing_time, placement=m.placement)
+        if not wait_for_server(self.client, self.decide_timeout):
+            raise RuntimeError('move_base\'s action server is not there')
+        b0 = self.battery
+        t0 = rospy.Time.now().to_sec()
+        outcomes = self.drive()
+        t_task = rospy.Time.now().to_sec() - t0
+        b1 = self.battery
+        status = mission_status(outcomes, len(self.spec.goals))
+        b_task = battery_used(b0.percentage, b1.percentage) if b0 is not None and b1 is not None else math.nan
+        row.update(mission_status=status, t_task=t_task, b_task=b_task, redecisions=len(self.redecisions))
+        if r.decide:
+            e = self.evaluate(status, t_task, b_task if math.isfinite(b_task) else 0.0, r.learn)
+            self.say(f'evaluation: {e.message}')
+            if e.ok:
+                row.update(value=e.result.value, good=e.result.good, label=e.result.label, learned=e.result.learned,
+                           placement=e.result.placement)
+        else:
+            self.say(f'{status}: T {t_task:.1f} s, B {b_task:.5f}')
+        row['wall_time'] = round(time.monotonic() - w0, 2)
+        return row
+
+    def spin(self) -> int:
+        rows, warnings = read_results(self.results)
+        for w in warnings:
+            rospy.logwarn(w)
+        done = {row['id'] for row in rows}
+        self.decided: Dict[str, str] = {row['condition']: row['decision'] for row in rows if row['decision']}
+        todo = [r for r in self.plan.runs if r.id not in done]
+        n = len(self.plan.runs)
+        self.say(f'{self.plan.task}@{self.plan.location}: {n} runs in the plan, {n - len(todo)} already done; '
+                 f'results in {self.results}')
+        for r in todo:
+            if rospy.is_shutdown():
+                return 1
+            row = self.run(self.plan.runs.index(r) + 1, n, r)
+            append_result(self.results, row)
+        self.say(f'plan done: {n} runs in {self.results}')
+        return 0
+
+
+@cnr_params.exit_on_config_error
+def main() -> None:
+    init_node('task_runner')
+    raise SystemExit(TaskRunner().spin())

@@ -1,0 +1,210 @@
+"""The ``migration_decider`` node (robot): the network-aware decision of thesis §4.2.3-§4.2.6 (package README).
+
+Before a task (``~decide``): a profile from the network monitor (``~profile_now``, optionally with an active
+probe), the k-NN decision of :mod:`network_monitor.core.advisor`, and the task's modules placed through
+migration_manager's ``~migrate``. During the task: every network profile is re-decided with hysteresis; a switch
+migrates the modules (in a thread: the profile callback never blocks). After it (``~evaluate``): Eq. 4-5, the
+label, the row appended to the ⟨task, location⟩'s training set. Each event is published on ``~decisions``.
+
+Everything it calls is on the robot (the network monitor and the migration manager run there), each call
+bounded by ``decider.service_timeout`` or the manager's own migration timeouts.
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+import os
+import threading
+import time
+from typing import Dict, List, Optional, Tuple
+
+import rospy
+
+import cnr_params
+from cnr_msgs.msg import NetworkProfile, Placement, TaskDecision
+from cnr_msgs.srv import (Decide, DecideResponse, EvaluateTask, EvaluateTaskResponse, Migrate, ProfileNow)
+from cnr_params import ConfigError, Section
+from cnr_params.ros import init_node, private_section
+from network_monitor.core.advisor import REDECISION, AdvisorError, Profile, TaskAdvisor
+from network_monitor.core.decision import Decision
+from network_monitor.core.decision_config import decision_config
+from network_monitor.core.evaluation import OFFLOAD, ONLOAD
+
+
+def profile_of(msg: NetworkProfile) -> Profile:
+    return Profile(c_l=msg.rtt, r_bw=msg.r_bw, rtt_spread=msg.rtt_spread, loss=msg.loss,
+                   method=msg.a_bw_method, alive=msg.alive)
+
+
+class DeciderNode:
+    def __init__(self) -> None:
+        p = private_section('~')
+        f = Section.from_file(p.string('config'))
+        cfg = decision_config(f)
+        overrides = {k: os.path.expanduser(p.string(k)) for k in ('training_dir', 'control_values') if p.string(k)}
+        self.cfg = dataclasses.replace(cfg, **overrides)
+        d = f.section('decider')
+        self.service_timeout = d.number('service_timeout', positive=True)
+        self.advisor = TaskAdvisor(self.cfg)
+        self.lock = threading.Lock()
+        self.active: Dict[str, str] = {}               # module -> host where active (from the manager)
+        self.migrating = False
+        self.pub = rospy.Publisher('~decisions', TaskDecision, queue_size=20, latch=True)
+        self.profile_now = rospy.ServiceProxy(d.string('profile_service'), ProfileNow)
+        self.migrate = rospy.ServiceProxy(d.string('migrate_service'), Migrate)
+        rospy.Subscriber(d.string('placement_topic'), Placement, self._on_placement, queue_size=10)
+        rospy.Subscriber(d.string('profile_topic'), NetworkProfile, self._on_profile, queue_size=10)
+        rospy.Service('~decide', Decide, self._on_decide)
+        rospy.Service('~evaluate', EvaluateTask, self._on_evaluate)
+        r = self.cfg.redecision
+        rospy.loginfo(f'migration_decider: k = {self.cfg.decision.k}, V_r = {self.cfg.v_r:g}, tasks '
+                      f'{", ".join(t + " (" + "/".join(m) + ")" for t, m in self.cfg.tasks.items())}; training sets in '
+                      f'{self.cfg.training_dir}; re-decision: margin {r.margin:g}, dwell {r.dwell:g} s, at most '
+                      f'{r.max_migrations} migration(s) per {r.window:g} s')
+
+    # ---------------------------------------------------------------- inputs
+    def _on_placement(self, msg: Placement) -> None:
+        with self.lock:
+            self.active = {m: h for m, h, moving in zip(msg.modules, msg.hosts, msg.migrating) if h and not moving}
+
+    def _on_profile(self, msg: NetworkProfile) -> None:
+        now = time.monotonic()
+        with self.lock:
+            if self.migrating:
+                return
+            switch = self.advisor.observe(profile_of(msg), now)
+            if switch is None:
+                return
+            self.migrating = True
+            running = self.advisor.running
+        placement, d = switch
+        hosts = self.advisor.hosts(running.task, placement)
+        rospy.loginfo(f'migration_decider: re-decision during {running.task}@{running.location}: {placement} '
+                      f'(RTT {1000 * msg.rtt:.0f} ms, R_bw {msg.r_bw:.3g}, votes {d.votes or "rule"})')
+        threading.Thread(target=self._redecide, args=(running.task, running.location, placement, d, msg, hosts),
+                         daemon=True).start()
+
+    def _redecide(self, task: str, location: str, placement: str, d: Decision, msg: NetworkProfile,
+                  hosts: Dict[str, str]) -> None:
+        try:
+            t0 = time.monotonic()
+            placed, moved, message = self.place(hosts)
+            out = self._message('redecided', task, location, placement, d, profile_of(msg), hosts)
+            out.reason, out.placed, out.placing_time, out.migrations, out.message = \
+                REDECISION, placed, time.monotonic() - t0, moved, message
+            self.pub.publish(out)
+        finally:
+            with self.lock:
+                self.migrating = False
+
+    # ---------------------------------------------------------------- placing
+    def place(self, hosts: Dict[str, str]) -> Tuple[bool, int, str]:
+        """Order each module that is not active on its host there (one at a time, the manager's ``~migrate``
+        returns when it is done or refused). Returns (all placed, migrations done, a message)."""
+        moved, notes = 0, []
+        for module, host in hosts.items():
+            with self.lock:
+                here = self.active.get(module)
+            if here == host:
+                continue
+            try:
+                res = self.migrate(module, host, '')
+            except (rospy.ServiceException, rospy.ROSException) as exc:
+                notes.append(f'{module} -> {host}: not ordered ({exc})')
+                continue
+            if res.ok and res.outcome == 'done':
+                moved += 1
+                with self.lock:
+                    self.active[module] = host
+                notes.append(f'{module} -> {host} in {res.duration:.1f} s')
+            else:
+                notes.append(f'{module} -> {host}: {res.outcome} ({res.message})')
+        with self.lock:
+            ok = all(self.active.get(m) == h for m, h in hosts.items())
+        return ok, moved, '; '.join(notes) or 'already placed'
+
+    # ---------------------------------------------------------------- services
+    def _message(self, event: str, task: str, location: str, placement: str, d: Decision, p: Profile,
+                 hosts: Dict[str, str]) -> TaskDecision:
+        out = TaskDecision(event=event, task=task, location=location, decision=placement, policy=d.policy,
+                           reason=d.reason, confidence=d.confidence, votes_offload=d.votes.get(OFFLOAD, 0),
+                           votes_onload=d.votes.get(ONLOAD, 0), c_l=p.c_l, r_bw=p.r_bw, rtt_spread=p.rtt_spread,
+                           loss=p.loss, profile_method=p.method,
+                           placement=','.join(f'{m}={h}' for m, h in hosts.items()),
+                           t_task=math.nan, b_task=math.nan, value=math.nan)
+        out.header.stamp = rospy.Time.now()
+        return out
+
+    def _on_decide(self, req) -> DecideResponse:
+        try:
+            res = self.profile_now(req.probe) if self._wait(self.profile_now) else None
+        except (rospy.ServiceException, rospy.ROSException) as exc:
+            res = None
+            rospy.logwarn(f'migration_decider: no profile from the network monitor: {exc}')
+        if res is None:
+            profile = Profile(math.nan, math.nan, math.nan, math.nan, 'none', alive=False)
+            note = 'no profile (network monitor not answering): '
+        else:
+            profile = profile_of(res.profile)
+            note = '' if res.success else f'probe failed ({res.message}): '
+        with self.lock:
+            try:
+                d, hosts, warnings = self.advisor.begin(req.task, req.location, profile, time.monotonic(),
+                                                        req.force)
+            except AdvisorError as exc:
+                return DecideResponse(ok=False, message=str(exc))
+        for w in warnings:
+            rospy.logwarn(f'migration_decider: {w}')
+        t0 = time.monotonic()
+        placed, moved, message = self.place(hosts)
+        with self.lock:
+            self.advisor.placed(time.monotonic(), moved)
+        out = self._message('decided', req.task, req.location, d.decision, d, profile, hosts)
+        out.placed, out.placing_time, out.migrations = placed, time.monotonic() - t0, moved
+        why = {'knn': f'k-NN {d.votes.get(d.decision, 0)} of {self.cfg.decision.k} votes',
+               'cold_start': 'cold-start rule', 'explore': f'exploration (policy: {d.policy})',
+               'no_profile': 'no usable profile: the robot', 'forced': 'forced'}.get(d.reason, d.reason)
+        out.message = (f'{note}{d.decision} ({why}) at RTT {1000 * profile.c_l:.0f} ms, R_bw {profile.r_bw:.3g}; '
+                       f'{message}')
+        rospy.loginfo(f'migration_decider: {req.task}@{req.location}: {out.message}')
+        self.pub.publish(out)
+        return DecideResponse(ok=True, message=out.message, decision=out)
+
+    def _on_evaluate(self, req) -> EvaluateTaskResponse:
+        with self.lock:
+            running = self.advisor.running
+            if running is None:
+                return EvaluateTaskResponse(ok=False, message='no task is running (call ~decide first)')
+            try:
+                row, control = self.advisor.finish(req.mission_status, req.t_task, req.b_task, time.time(),
+                                                   req.learn)
+            except (ConfigError, ValueError) as exc:
+                return EvaluateTaskResponse(ok=False, message=str(exc))
+        d = running.decision
+        out = self._message('evaluated', row.task, row.location, row.decision, d, running.profile,
+                            self.advisor.hosts(row.task, running.placement))
+        out.placement = row.placement
+        out.mission_status, out.t_task, out.b_task, out.value, out.good, out.label = \
+            row.mission_status, row.t_task, row.b_task, row.value, row.good, row.label
+        out.learned = bool(req.learn and running.profile.usable)
+        out.message = (f'{row.decision} {row.mission_status}: T {row.t_task:.1f} s (CT {control.ct_mean:.1f}), '
+                       f'B {row.b_task:.5f} (CB {control.cb_mean:.5f}), value {row.value:.3f} '
+                       f'{"<=" if row.good else ">"} V_r {self.cfg.v_r:g}: label {row.label}'
+                       + ('' if out.learned else ' (not learned)'))
+        rospy.loginfo(f'migration_decider: {row.task}@{row.location}: {out.message}')
+        self.pub.publish(out)
+        return EvaluateTaskResponse(ok=True, message=out.message, result=out)
+
+    def _wait(self, proxy) -> bool:
+        try:
+            proxy.wait_for_service(self.service_timeout)
+            return True
+        except rospy.ROSException:
+            return False
+
+
+@cnr_params.exit_on_config_error
+def main() -> None:
+    init_node('migration_decider')
+    DeciderNode()
+    rospy.spin()

@@ -1,0 +1,204 @@
+"""The network-aware task loop's ROS-free cores: the advisor (decide, re-decide, evaluate, learn), the task
+definitions and plans (cnr_mission.core.task) and the campaign's conditions and analysis
+(cnr_benchmarks.core.campaign). Unit tests only: no master."""
+import ast
+import dataclasses
+import math
+import os
+
+import pytest
+import yaml
+
+from cnr_benchmarks.core import campaign
+from cnr_mission.core.task import (ABORTED, COMPLETED, GAVE_UP, OTHER, SUCCEEDED, TIMED_OUT, TOO_LONG,
+                                   append_result, battery_used, load_plan, load_task, mission_status, read_results,
+                                   resolve_force)
+from cnr_params import ConfigError, Section
+from network_monitor.core.advisor import FORCED, AdvisorError, Profile, TaskAdvisor
+from network_monitor.core.decision import COLD_START, KNN
+from network_monitor.core.decision_config import load_decision_config
+from network_monitor.core.evaluation import (OFFLOAD, ONLOAD, ControlValues, Outcome, write_control_values)
+from network_monitor.core.training import TrainingSet
+
+WS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CONTROL = ControlValues('corridor_round_trip', 30.0, 2.0, 0.003, 0.0002, 20, '2026-11-24', 'test')
+GOOD = Profile(c_l=0.01, r_bw=80.0, rtt_spread=0.001, loss=0.0, method='probe')
+BAD = Profile(c_l=0.25, r_bw=1.2, rtt_spread=0.01, loss=0.02, method='probe')
+
+
+def advisor(tmp_path, **redecision):
+    cfg = load_decision_config(os.path.join(WS, 'config', 'decision.yaml'))
+    control = str(tmp_path / 'control_values.yaml')
+    write_control_values(control, CONTROL)
+    e = dataclasses.replace(cfg.decision.exploration, rate=0.0, seed=0)
+    cfg = dataclasses.replace(cfg, training_dir=str(tmp_path / 'training'), control_values=control,
+                              decision=dataclasses.replace(cfg.decision, exploration=e),
+                              redecision=dataclasses.replace(cfg.redecision, **redecision))
+    return TaskAdvisor(cfg)
+
+
+@pytest.mark.parametrize('path', ['network_monitor/src/network_monitor/core/advisor.py',
+                                  'cnr_mission/src/cnr_mission/core/task.py',
+                                  'cnr_benchmarks/src/cnr_benchmarks/core/campaign.py'])
+def test_cores_never_import_rospy(path):
+    with open(os.path.join(WS, 'src', path), encoding='utf-8') as f:
+        tree = ast.parse(f.read())
+    imported = {a.name.split('.')[0] for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+    imported |= {n.module.split('.')[0] for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+    assert 'rospy' not in imported
+
+
+# ---------------------------------------------------------------- advisor
+def test_cold_start_then_knn_learns_from_evaluated_runs(tmp_path):
+    a = advisor(tmp_path)
+    d, hosts, warnings = a.begin('corridor_round_trip', 'corridor', GOOD, 0.0)
+    assert (d.decision, d.reason, hosts, warnings) == (OFFLOAD, COLD_START, {'move_base': 'cloud'}, [])
+    a.placed(0.0, 1)
+    row, control = a.finish(COMPLETED, 36.0, 0.0036, 1.7e9, learn=True)     # 20 % worse than the control: bad
+    assert row.value == pytest.approx(1.2) and not row.good and row.label == ONLOAD
+    assert row.placement == 'move_base=cloud' and row.c_l == GOOD.c_l and control == CONTROL
+    with pytest.raises(AdvisorError):
+        a.finish(COMPLETED, 30.0, 0.003, 1.7e9, learn=True)                 # nothing running any more
+    for i in range(4):                                                      # the set fills to k rows
+        a.begin('corridor_round_trip', 'corridor', GOOD, 10.0 + i, force=ONLOAD)
+        a.placed(10.0 + i, 0)
+        a.finish(COMPLETED, 29.0, 0.0029, 1.7e9 + i + 1, learn=True)        # onload was fine: label onload
+    d, _, _ = a.begin('corridor_round_trip', 'corridor', GOOD, 20.0)
+    assert (d.decision, d.reason, d.votes) == (ONLOAD, KNN, {OFFLOAD: 0, ONLOAD: 5})
+    rows, _ = TrainingSet(str(tmp_path / 'training'), 'corridor_round_trip', 'corridor').read()
+    assert len(rows) == 5 and [r.explored for r in rows] == [False] + [True] * 4   # forced against the policy
+
+
+def test_forced_runs_keep_the_policy_and_a_failure_labels_the_other(tmp_path):
+    a = advisor(tmp_path)
+    d, hosts, _ = a.begin('corridor_round_trip', 'corridor', BAD, 0.0, force=OFFLOAD)
+    assert (d.decision, d.reason, d.policy, hosts) == (OFFLOAD, FORCED, ONLOAD, {'move_base': 'cloud'})
+    a.placed(0.0, 1)
+    row, _ = a.finish(ABORTED, 12.0, 0.001, 1.7e9, learn=True)
+    assert row.label == ONLOAD and row.explored and not row.good
+
+
+def test_unknown_profile_onloads_and_is_not_learned(tmp_path):
+    a = advisor(tmp_path)
+    lost = Profile(math.nan, math.nan, math.nan, math.nan, 'none', alive=False)
+    d, hosts, _ = a.begin('corridor_round_trip', 'corridor', lost, 0.0)
+    assert d.decision == ONLOAD and hosts == {'move_base': 'robot'}
+    a.placed(0.0, 0)
+    a.finish(COMPLETED, 30.0, 0.003, 1.7e9, learn=True)
+    assert TrainingSet(str(tmp_path / 'training'), 'corridor_round_trip', 'corridor').read()[0] == []
+
+
+def test_bad_requests_are_refused(tmp_path):
+    a = advisor(tmp_path)
+    for args in (('nope', 'corridor'), ('corridor_round_trip', 'moon')):
+        with pytest.raises(AdvisorError):
+            a.begin(*args, GOOD, 0.0)
+    with pytest.raises(AdvisorError):
+        a.begin('corridor_round_trip', 'corridor', GOOD, 0.0, force='sideways')
+    a.begin('corridor_round_trip', 'corridor', GOOD, 0.0)
+    with pytest.raises(AdvisorError):
+        a.begin('corridor_round_trip', 'corridor', GOOD, 1.0)               # one task at a time
+
+
+def test_mid_task_redecision_waits_for_the_dwell_and_respects_the_budget(tmp_path):
+    a = advisor(tmp_path, dwell=2.0, max_migrations=1, window=30.0, margin=0.8)
+    a.begin('corridor_round_trip', 'corridor', GOOD, 0.0)                   # cold start: offload
+    a.placed(0.0, 1)                                                        # that migration uses the budget
+    assert a.observe(BAD, 1.0) is None
+    assert a.observe(BAD, 10.0) is None                                     # dwell met, budget not (window)
+    switch = a.observe(BAD, 31.0)
+    assert switch is not None and switch[0] == ONLOAD
+    assert a.observe(GOOD, 40.0) is None and a.observe(GOOD, 50.0) is None  # budget: one per 30 s
+    row, _ = a.finish(COMPLETED, 30.0, 0.003, 1.7e9, learn=True)
+    assert row.placement == 'move_base=cloud>robot' and row.decision == OFFLOAD
+
+
+# ---------------------------------------------------------------- tasks and plans
+def test_the_shipped_task_and_status_rules():
+    t = load_task(Section.from_file(os.path.join(WS, 'config', 'scenarios', 'corridor.yaml')), 'corridor_round_trip')
+    assert t.start == (0.5, 0.0, 0.0) and len(t.goals) == 2 and t.goal_timeout > 0
+    assert mission_status([SUCCEEDED, SUCCEEDED], 2) == COMPLETED
+    assert mission_status([SUCCEEDED, GAVE_UP], 2) == ABORTED
+    assert mission_status([TOO_LONG], 2) == TIMED_OUT
+    assert mission_status([SUCCEEDED], 2) == ABORTED                        # stopped before the end
+    assert battery_used(80.0, 79.5) == pytest.approx(0.005)
+    with pytest.raises(ConfigError, match='tasks.nope'):
+        load_task(Section({'tasks': {}}, 'x.yaml'), 'nope')
+
+
+def test_plans_resolve_other_and_refuse_bad_runs(tmp_path):
+    doc = campaign.plan_document('corridor_round_trip', 'corridor', 6.0,
+                                 campaign.draw_conditions(3, 7, campaign.Ranges(0, 200, 0.5, 50, 0, 0.05)))
+    p = tmp_path / 'plan.yaml'
+    p.write_text(yaml.safe_dump(doc))
+    plan = load_plan(str(p))
+    assert len(plan.runs) == 6 and plan.runs[1].force == OTHER and plan.runs[0].link.rtt_ms <= 200
+    assert resolve_force(OTHER, OFFLOAD) == ONLOAD and resolve_force('', None) == ''
+    with pytest.raises(ValueError):
+        resolve_force(OTHER, '')
+    doc['runs'][0]['force'] = 'other'
+    p.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match=r'runs\[0\]\.force'):
+        load_plan(str(p))
+    doc['runs'][0].update(force='', id=doc['runs'][1]['id'])
+    p.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match='id'):
+        load_plan(str(p))
+
+
+def test_results_are_appended_and_a_torn_line_is_reported(tmp_path):
+    path = str(tmp_path / 'results.tsv')
+    append_result(path, dict(id='a', condition='c1', t_task=30.5, good=True))
+    with open(path, 'a') as f:
+        f.write('torn\tline')                                                # a crash mid-row
+    append_result(path, dict(id='b', condition='c1'))
+    rows, warnings = read_results(path)
+    assert [r['id'] for r in rows] == ['a', 'b'] and rows[0]['t_task'] == '30.5' and rows[0]['good'] == '1'
+    assert len(warnings) == 1 and 'results.tsv:3' in warnings[0]
+
+
+# ---------------------------------------------------------------- campaign
+def test_conditions_are_reproducible_and_in_range():
+    r = campaign.Ranges(0, 200, 0.5, 50, 0, 0.05)
+    a, b = campaign.draw_conditions(50, 3, r), campaign.draw_conditions(50, 3, r)
+    assert a == b and a != campaign.draw_conditions(50, 4, r)
+    assert campaign.draw_conditions(10, 3, r, first=41) == a[40:]            # the i-th depends on the seed only
+    assert all(0 <= c.rtt_ms <= 200 and 0.5 <= c.rate <= 50 and 0 <= c.loss <= 0.05 for c in a)
+
+
+def _result(cid, run, decision, status, t, b, rtt=20.0, c_l=0.02, r_bw=50.0):
+    return dict(id=f'{cid}-{run}', condition=cid, decision=decision, mission_status=status, t_task=str(t),
+                b_task=str(b), rtt_ms=str(rtt), rate_mbit='20', loss='0', c_l=str(c_l), r_bw=str(r_bw),
+                reason='knn')
+
+
+def test_pairs_and_oracle():
+    rows = [_result('c1', 'decided', OFFLOAD, COMPLETED, 28, 0.0027), _result('c1', 'other', ONLOAD, COMPLETED, 30, 0.003),
+            _result('c2', 'decided', ONLOAD, COMPLETED, 30, 0.003), _result('c2', 'other', OFFLOAD, ABORTED, 9, 0.001),
+            _result('c3', 'decided', ONLOAD, COMPLETED, 30, 0.003)]          # unpaired: left out
+    ps = campaign.pairs(rows)
+    assert [p.condition for p in ps] == ['c1', 'c2']
+    assert [campaign.oracle(p, CONTROL) for p in ps] == [OFFLOAD, ONLOAD]
+    assert ps[1].offload == Outcome(9.0, 0.001, ABORTED)
+
+
+def test_static_rule_fit_and_learning_curve():
+    from test_network_monitor_decision import SETTINGS, row
+    rows = [row(0.01 * i, 50.0, OFFLOAD if i < 8 else ONLOAD, timestamp=1.7e9 + i) for i in range(20)]
+    a, b = campaign.static_rule_fit(rows)
+    assert 0.07 < a <= 0.08 + 1e-6 and campaign.static_rule(a, b, 0.05, 50.0) == OFFLOAD
+    held = [campaign.Pair(f'h{i}', 0, 0, 0, 0.01 * i + 0.005, 50.0, OFFLOAD, 'knn', None, None, {}, {})
+            for i in range(20)]
+    truth = [OFFLOAD if i < 8 else ONLOAD for i in range(20)]
+    curve = campaign.learning_curve(rows, 20, held, truth, SETTINGS)
+    assert [c['rows'] for c in curve] == [5, 10, 15, 20]
+    assert curve[-1]['knn'] >= 0.9 and curve[-1]['static'] >= 0.9
+
+
+def test_fits_and_crossings():
+    fit = campaign.power_fit([1, 2, 4, 8], [40, 20, 10, 5])
+    assert fit[0] == pytest.approx(40) and fit[1] == pytest.approx(-1)
+    assert campaign.crossing(fit, 10.0) == pytest.approx(4.0)
+    assert campaign.linear_fit([0, 1, 2], [1, 3, 5]) == pytest.approx((1, 2))
+    assert campaign.failure_rtt([(10, COMPLETED), (150, ABORTED), (170, ABORTED), (130, COMPLETED)]) == 140.0
+    assert math.isnan(campaign.failure_rtt([(10, COMPLETED)]))
