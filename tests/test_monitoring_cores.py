@@ -319,3 +319,7 @@ def test_store_check_compares_only_what_both_saw_and_finds_losses_and_duplicates
     c = check_store(published, [1.0, 2.0, 2.0, 3.5, 4.0, 6.0])
     assert (c['missing_count'], c['missing'], c['duplicates'], c['unseen']) == (2, [3.0, 5.0], 1, 1), c
     assert check_store(published, [])['published_before_first'] == 6
+    # two measurements sharing a stamp, both stored: neither lost nor a duplicate
+    c = check_store([1.0, 2.0, 2.0, 3.0], [1.0, 2.0, 2.0, 3.0])
+    assert (c['missing_count'], c['duplicates'], c['shared_stamps']) == (0, 0, 1), c
+    assert check_store([1.0, 2.0, 2.0, 3.0], [1.0, 2.0, 3.0])['missing'] == [2.0]

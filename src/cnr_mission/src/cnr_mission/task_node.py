@@ -133,7 +133,7 @@ class TaskRunner:
         self.redecisions = []
         if r.decide:
             self.decide.wait_for_service(self.decide_timeout)
-            d = self.decide(self.plan.task, self.plan.location, force, True)
+            d = self.decide(self.plan.task, self.plan.location, force, True, r.explore)
             if not d.ok:
                 raise RuntimeError(f'the decider refused: {d.message}')
             self.say(f'decision: {d.message}')

@@ -85,7 +85,7 @@ class KestrelNode:
         sensor = LaggedSensor(self.p.time_constant)
         rng = np.random.default_rng(self.p.seed or None)
         air_pub = rospy.Publisher('~air_temperature', Temperature, queue_size=10)
-        state = {'air': None}
+        state = {'air': None, 'stamp': None}
 
         def on_pose(msg: Odometry) -> None:
             x, y = msg.pose.pose.position.x, msg.pose.pose.position.y
@@ -106,6 +106,9 @@ class KestrelNode:
                     return
                 reading, air = sensor.value, state['air']
             stamp = rospy.Time.now()
+            if stamp == state['stamp']:
+                return      # a late timer catching up before the clock moved: one reading per instant
+            state['stamp'] = stamp
             noisy = reading + (rng.normal(0.0, self.p.noise_stddev) if self.p.noise_stddev > 0 else 0.0)
             self.emit(noisy, stamp)
             m = Temperature()

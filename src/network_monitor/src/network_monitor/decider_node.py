@@ -150,7 +150,7 @@ class DeciderNode:
         with self.lock:
             try:
                 d, hosts, warnings = self.advisor.begin(req.task, req.location, profile, time.monotonic(),
-                                                        req.force)
+                                                        req.force, req.explore)
             except AdvisorError as exc:
                 return DecideResponse(ok=False, message=str(exc))
         for w in warnings:

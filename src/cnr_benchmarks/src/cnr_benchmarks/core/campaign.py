@@ -64,15 +64,18 @@ def plan_document(task: str, location: str, settle: float, conditions: Sequence[
     runs = []
     for c in conditions:
         link = dict(delay=c.rtt_ms / 2.0, rate=c.rate, loss=c.loss)
-        runs.append(dict(id=f'{c.id}-decided', condition=c.id, link=link, force='', decide=True, learn=True))
-        runs.append(dict(id=f'{c.id}-other', condition=c.id, link=link, force='other', decide=True, learn=True))
+        runs.append(dict(id=f'{c.id}-decided', condition=c.id, link=link, force='', decide=True, learn=True,
+                         explore=True))
+        runs.append(dict(id=f'{c.id}-other', condition=c.id, link=link, force='other', decide=True, learn=True,
+                         explore=False))
     return dict(task=task, location=location, settle=settle, runs=runs)
 
 
 def control_plan(task: str, location: str, settle: float, runs: int) -> Dict:
     """The control experiment: ``runs`` runs with every module on the robot, no decision (thesis Table 4-5)."""
     return dict(task=task, location=location, settle=settle,
-                runs=[dict(id=f'control-{i:02d}', condition=f'control-{i:02d}', force='', decide=False, learn=False)
+                runs=[dict(id=f'control-{i:02d}', condition=f'control-{i:02d}', force='', decide=False, learn=False,
+                           explore=False)
                       for i in range(1, runs + 1)])
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import json
 import math
 import os
+from collections import Counter
 from dataclasses import dataclass
 from typing import Dict, Optional, Sequence, Tuple
 
@@ -112,23 +113,30 @@ def check_store(published: Sequence[float], stored_stamps: Sequence[float]) -> D
     """Every measurement published while both the store and this monitor were listening is in the store, once.
     The store keeps measurements in stamp order; the window is the stamps both saw: from the later of the two
     first ones (either subscriber may connect to a new merger first) to the earlier of the two newest ones (the
-    newest may have been in flight to either when the report was written). One published in the window and
-    missing from the store is lost; one stored in the window that this monitor never saw (``unseen``) means the
-    monitor dropped it. Outside the window: ``published_before_first`` were made before the store was up (the
-    two-host mission with migration_manager starts the merger only once the first local_mapcell_manager
-    instance is active, so at most a connection race's worth), ``in_flight`` after its newest."""
+    newest may have been in flight to either when the report was written). Stamps are compared as multisets
+    (two measurements may share a stamp): one published in the window more often than stored is lost
+    (``missing``), one stored more often than published is a duplicate; one stored in the window that this
+    monitor never saw (``unseen``) means the monitor dropped it. Outside the window: ``published_before_first``
+    were made before the store was up (the two-host mission with migration_manager starts the merger only once
+    the first local_mapcell_manager instance is active, so at most a connection race's worth), ``in_flight``
+    after its newest."""
     stored = sorted(round(t, 6) for t in stored_stamps)
-    if not stored or not published:
+    pub = [round(t, 6) for t in published]
+    shared = len(pub) - len(set(pub))
+    if not stored or not pub:
         return dict(stored=len(stored), published_since_first=0, stored_in_window=0, missing_count=0, missing=[],
                     unseen=0, duplicates=len(stored) - len(set(stored)), in_flight=0,
-                    published_before_first=len(published))
-    lo, hi = max(stored[0], min(published)), min(stored[-1], max(published))
-    have, seen = set(stored), set(published)
-    window = [t for t in published if lo <= t <= hi]
-    in_store = [t for t in stored if lo <= t <= hi]
-    missing = [t for t in window if t not in have]
-    return dict(stored=len(stored), published_since_first=len(window), stored_in_window=len(in_store),
-                missing_count=len(missing), missing=missing[:50],
-                unseen=sum(1 for t in in_store if t not in seen), duplicates=len(stored) - len(have),
-                in_flight=sum(1 for t in published if t > stored[-1]),
-                published_before_first=sum(1 for t in published if t < stored[0]))
+                    published_before_first=len(pub), shared_stamps=shared)
+    lo, hi = max(stored[0], min(pub)), min(stored[-1], max(pub))
+    window = Counter(t for t in pub if lo <= t <= hi)
+    in_store = Counter(t for t in stored if lo <= t <= hi)
+    missing = sorted((window - in_store).elements())
+    extra = in_store - window
+    seen = set(pub)
+    outside = Counter(t for t in stored if not lo <= t <= hi)
+    return dict(stored=len(stored), published_since_first=sum(window.values()),
+                stored_in_window=sum(in_store.values()), missing_count=len(missing), missing=missing[:50],
+                unseen=sum(n for t, n in extra.items() if t not in seen),
+                duplicates=sum(n for t, n in extra.items() if t in seen) + sum(n - 1 for n in outside.values()),
+                in_flight=sum(1 for t in pub if t > stored[-1]),
+                published_before_first=sum(1 for t in pub if t < stored[0]), shared_stamps=shared)

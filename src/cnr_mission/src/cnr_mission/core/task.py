@@ -16,7 +16,8 @@ for longer than the runner's ``server_timeout``); ``timed_out`` when a goal took
 A *plan* (YAML) lists runs for the ``task_runner`` node; each has an id, the link to set before it (optional),
 and what to decide (``force``: '' = the migration_decider decides, offload | onload = that placement;
 ``other`` = the other placement than the previous run of the same condition ran, for paired runs;
-``decide: false`` = no decider at all, e.g. the control runs). Results are appended to a TSV, one row per run,
+``decide: false`` = no decider at all, e.g. the control runs; ``learn``: append the evaluated row to the
+training set; ``explore``: the decision may explore). Results are appended to a TSV, one row per run,
 so a plan that was interrupted resumes after its last finished run (:func:`read_results`).
 """
 from __future__ import annotations
@@ -100,6 +101,7 @@ class RunSpec:
     force: str              # '' | offload | onload | other
     decide: bool            # ask the migration_decider (False: run as placed, no evaluation)
     learn: bool             # the decider appends the evaluated row to the training set
+    explore: bool           # the decision may explore (False: the k-NN's or the rule's choice)
 
 
 @dataclass(frozen=True)
@@ -132,7 +134,7 @@ def load_plan(path: str) -> Plan:
             raise r.error('force', 'other needs an earlier run of the same condition')
         link = _link(r.section('link')) if r.raw('link', None) is not None else None
         runs.append(RunSpec(id=rid, condition=r.string('condition'), link=link, force=force,
-                            decide=r.boolean('decide'), learn=r.boolean('learn')))
+                            decide=r.boolean('decide'), learn=r.boolean('learn'), explore=r.boolean('explore')))
     if not runs:
         raise s.error('runs', 'expected at least one run')
     return Plan(task=s.string('task'), location=s.string('location'), settle=s.number('settle', nonnegative=True),

@@ -92,10 +92,11 @@ class TaskAdvisor:
         return load_control_values(self.cfg.control_values, task)
 
     # ---------------------------------------------------------------- a task
-    def begin(self, task: str, location: str, profile: Profile, now: float, force: str = '') -> \
+    def begin(self, task: str, location: str, profile: Profile, now: float, force: str = '',
+              explore: bool = True) -> \
             Tuple[Decision, Dict[str, str], List[str]]:
-        """Decide before a task. Returns the decision, the host each of the task's modules must be active on,
-        and the training set's warnings."""
+        """Decide before a task (``explore`` False: the policy, never an exploration). Returns the decision,
+        the host each of the task's modules must be active on, and the training set's warnings."""
         if self.running is not None:
             raise AdvisorError(f'task {self.running.task}@{self.running.location} is still running (evaluate it '
                                f'first)')
@@ -112,7 +113,7 @@ class TaskAdvisor:
             d = Decision(force, FORCED, policy.decision, policy.votes, policy.neighbours, policy.point,
                          policy.votes.get(force, 0) / self.cfg.decision.k if policy.votes else 1.0)
         else:
-            d = decider.decide(c_l, r_bw)
+            d = decider.decide(c_l, r_bw) if explore else decider.policy(c_l, r_bw)
         self.running = RunningTask(task, location, profile, d, now, d.decision, [d.decision])
         return d, self.hosts(task, d.decision), warnings
 

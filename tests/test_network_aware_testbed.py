@@ -1,0 +1,74 @@
+"""The network-aware decision on the testbed (root): the two-host mission in task mode, network_monitor's
+migration_decider deciding by k-NN before each task, migration_manager placing move_base, the task_runner
+driving the corridor round trip. About three minutes."""
+import os
+import subprocess
+
+import pytest
+import yaml
+
+from cnr_harness import Proc, wait_until
+from cnr_mission.core.task import COMPLETED, read_results
+from network_monitor.core.evaluation import OFFLOAD, ONLOAD, ControlValues, write_control_values
+from network_monitor.core.training import Row, TrainingSet
+
+WS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+LOGS = os.path.join(WS, 'build', 'test_logs')
+pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason='needs root (network namespaces, TUN devices, cgroups)')
+TASK, LOCATION = 'corridor_round_trip', 'corridor'
+
+
+def seed_row(c_l, r_bw, label, i):
+    """A past run: ``label`` was run and was good."""
+    return Row(r_bw=r_bw, c_l=c_l, decision=label, mission_status=COMPLETED, b_task=0.003, t_task=30.0,
+               timestamp=1.7e9 + i, task=TASK, location=LOCATION,
+               placement='move_base=' + ('cloud' if label == OFFLOAD else 'robot'), rtt_spread=0.001, loss=0.0,
+               profile_method='probe', value=1.0, good=True, label=label, explored=False, source='local')
+
+
+def test_a_good_link_offloads_and_a_bad_one_onloads_by_knn(tmp_path):
+    training = str(tmp_path / 'training')
+    seed = [seed_row(0.002 + 0.001 * i, 500.0 + 100 * i, OFFLOAD, i) for i in range(5)] + \
+           [seed_row(0.28 + 0.01 * i, 1.1 + 0.1 * i, ONLOAD, 10 + i) for i in range(5)]
+    TrainingSet(training, TASK, LOCATION).append(*seed)
+    control = str(tmp_path / 'control_values.yaml')
+    write_control_values(control, ControlValues(TASK, 30.0, 3.0, 0.003, 0.0003, 20, '2026-11-24', 'test'))
+    plan = dict(task=TASK, location=LOCATION, settle=6.0, runs=[
+        dict(id='good', condition='good', link=dict(delay=1.0, rate=0.0, loss=0.0), force='', decide=True,
+             learn=True, explore=False),
+        dict(id='bad', condition='bad', link=dict(delay=150.0, rate=0.0, loss=0.0), force='', decide=True,
+             learn=True, explore=False)])
+    plan_path = tmp_path / 'plan.yaml'
+    plan_path.write_text(yaml.safe_dump(plan))
+    results = str(tmp_path / 'results.tsv')
+    scenario = os.path.join(WS, 'config', 'scenarios', 'corridor.yaml')
+    _name, map_file, x, y, a = subprocess.run(['rosrun', 'cnr_mission', 'check_scenario', scenario],
+                                              capture_output=True, text=True, check=True).stdout.split()
+    proc = Proc(['rosrun', 'cnr_mission', 'two_host_mission', '--config-dir', os.path.join(WS, 'config'),
+                 '--scenario', scenario, '--map', map_file, '--start', x, y, a, '--placement', 'all_robot',
+                 '--report-dir', str(tmp_path / 'session'), '--port', '11411', '--task-plan', str(plan_path),
+                 '--task-results', results, '--training-dir', training, '--control-values', control],
+                os.path.join(LOGS, 'network_aware_testbed.log'))
+    try:
+        wait_until(lambda: proc.poll() is not None, 600, 'the task session to end')
+    finally:
+        proc.stop()
+    out = proc.output()
+    assert proc.returncode == 0, out[-3000:]
+    assert not os.path.exists('/var/run/netns/robot'), 'the testbed was left up'
+    rows, warnings = read_results(results)
+    assert warnings == [] and [r['id'] for r in rows] == ['good', 'bad'], out[-3000:]
+    good, bad = rows
+    # good link: the k-NN (5 offload neighbours) offloads, move_base migrates to the cloud and drives from there
+    assert (good['decision'], good['reason'], good['placed']) == (OFFLOAD, 'knn', '1'), good
+    assert good['placement'] == 'move_base=cloud' and good['mission_status'] == COMPLETED, good
+    assert float(good['c_l']) < 0.05 and float(good['placing_time']) > 0
+    # bad link (RTT 300 ms): onload, move_base back on the robot
+    assert (bad['decision'], bad['reason'], bad['placed']) == (ONLOAD, 'knn', '1'), bad
+    assert bad['placement'] == 'move_base=robot' and bad['mission_status'] == COMPLETED, bad
+    assert float(bad['c_l']) > 0.25
+    for r in rows:                              # evaluated by Eq. 4-5 and learned
+        assert r['learned'] == '1' and float(r['t_task']) > 10 and r['label'] in (OFFLOAD, ONLOAD)
+    learned, _ = TrainingSet(training, TASK, LOCATION).read()
+    assert len(learned) == 12 and [r.decision for r in learned[10:]] == [OFFLOAD, ONLOAD]
+    assert 'Traceback' not in out
