@@ -121,7 +121,7 @@ def test_the_shipped_task_and_status_rules():
     assert mission_status([SUCCEEDED, GAVE_UP], 2) == ABORTED
     assert mission_status([TOO_LONG], 2) == TIMED_OUT
     assert mission_status([SUCCEEDED], 2) == ABORTED                        # stopped before the end
-    assert battery_used(80.0, 79.5) == pytest.approx(0.005)
+    assert battery_used(0.80, 0.795) == pytest.approx(0.005)      # BatteryState.percentage: 0..1
     with pytest.raises(ConfigError, match='tasks.nope'):
         load_task(Section({'tasks': {}}, 'x.yaml'), 'nope')
 

@@ -58,6 +58,7 @@ class TaskRunner:
         self.last_status = time.monotonic()         # wall time move_base's action status was last heard
         rospy.Subscriber(f'{action}/status', GoalStatusArray, self._on_status, queue_size=2)
         self.battery: Optional[BatteryState] = None
+        self.link = None                            # the link the previous run set
         self.redecisions: List[TaskDecision] = []
         rospy.Subscriber(p.string('battery_topic'), BatteryState, self._on_battery, queue_size=2)
         rospy.Subscriber(f'{decider}/decisions', TaskDecision, self._on_decision, queue_size=20)
@@ -123,9 +124,11 @@ class TaskRunner:
             f'RTT {r.link.rtt_ms:.0f} ms, {r.link.rate:g} Mbit/s, loss {100 * r.link.loss:.1f} %'
         self.say(f'run {i}/{n} {r.id}: {link or "link as it is"}'
                  + (f'; placement forced: {force}' if force else ''))
-        deadline = time.monotonic() + self.plan.settle
-        while time.monotonic() < deadline and not rospy.is_shutdown():     # the monitor's window fills
-            time.sleep(0.1)
+        if r.link != self.link:             # a new link: let the monitor's window fill with it
+            deadline = time.monotonic() + self.plan.settle
+            while time.monotonic() < deadline and not rospy.is_shutdown():
+                time.sleep(0.1)
+        self.link = r.link
         sx, sy, sa = self.spec.start
         res = self.teleport(Pose2D(sx, sy, sa), False)
         if not res.success:

@@ -45,6 +45,7 @@ class DeciderNode:
         self.cfg = dataclasses.replace(cfg, **overrides)
         d = f.section('decider')
         self.service_timeout = d.number('service_timeout', positive=True)
+        self.placement_timeout = d.number('placement_timeout', positive=True)
         self.advisor = TaskAdvisor(self.cfg)
         self.lock = threading.Lock()
         self.active: Dict[str, str] = {}               # module -> host where active (from the manager)
@@ -103,8 +104,11 @@ class DeciderNode:
         returns when it is done or refused). Returns (all placed, migrations done, a message)."""
         moved, notes = 0, []
         for module, host in hosts.items():
-            with self.lock:
-                here = self.active.get(module)
+            here = self._settled(module)
+            if here is None:
+                notes.append(f'{module} -> {host}: not ordered (not active anywhere within '
+                             f'{self.placement_timeout:g} s)')
+                continue
             if here == host:
                 continue
             try:
@@ -122,6 +126,18 @@ class DeciderNode:
         with self.lock:
             ok = all(self.active.get(m) == h for m, h in hosts.items())
         return ok, moved, '; '.join(notes) or 'already placed'
+
+    def _settled(self, module: str) -> Optional[str]:
+        """Where ``module`` is active once it is not starting or migrating (waits up to placement_timeout: the
+        managed modules start a minute after launch on the capped robot); None if it never settles."""
+        deadline = time.monotonic() + self.placement_timeout
+        while not rospy.is_shutdown():
+            with self.lock:
+                here = self.active.get(module)
+            if here is not None or time.monotonic() >= deadline:
+                return here
+            time.sleep(0.2)
+        return None
 
     # ---------------------------------------------------------------- services
     def _message(self, event: str, task: str, location: str, placement: str, d: Decision, p: Profile,

@@ -77,8 +77,9 @@ def mission_status(outcomes: Sequence[str], goals: int) -> str:
 
 
 def battery_used(percentage_before: float, percentage_after: float) -> float:
-    """B_task: the fraction of a full battery used, from two battery_state percentages (0..100)."""
-    return (percentage_before - percentage_after) / 100.0
+    """B_task: the fraction of a full battery used, from two sensor_msgs/BatteryState ``percentage`` readings
+    (ROS: 0..1)."""
+    return percentage_before - percentage_after
 
 
 # ---------------------------------------------------------------- plans
