@@ -137,6 +137,7 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
                 p.add_argument(f'--{k}', type=float, default=v)
     args = ap.parse_args(argv)
     args.argv = list(argv if argv is not None else sys.argv[1:])
+    args.argv.remove(args.cmd)          # the script's own arguments (the subcommand is the script's choice)
     args.out = os.path.abspath(args.out)
     if getattr(args, 'runs', 2) < 2 or getattr(args, 'conditions', 1) < 1:
         ap.error('--runs must be >= 2 and --conditions >= 1')

@@ -130,6 +130,7 @@ class TaskRunner:
                 time.sleep(0.1)
         self.link = r.link
         sx, sy, sa = self.spec.start
+        self.teleport.wait_for_service(self.decide_timeout)
         res = self.teleport(Pose2D(sx, sy, sa), False)
         if not res.success:
             raise RuntimeError(f'could not put the robot at the start ({sx}, {sy}): {res.message}')
@@ -179,7 +180,13 @@ class TaskRunner:
         for r in todo:
             if rospy.is_shutdown():
                 return 1
-            row = self.run(self.plan.runs.index(r) + 1, n, r)
+            try:
+                row = self.run(self.plan.runs.index(r) + 1, n, r)
+            except (rospy.ServiceException, rospy.ROSException, RuntimeError) as exc:
+                if rospy.is_shutdown():
+                    return 1
+                self.say(f'run {r.id} failed: {exc}; the plan stops here (run it again to resume)')
+                return 1
             append_result(self.results, row)
         self.say(f'plan done: {n} runs in {self.results}')
         return 0
