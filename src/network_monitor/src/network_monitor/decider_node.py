@@ -100,16 +100,15 @@ class DeciderNode:
 
     # ---------------------------------------------------------------- placing
     def place(self, hosts: Dict[str, str]) -> Tuple[bool, int, str]:
-        """Order each module that is not active on its host there (one at a time, the manager's ``~migrate``
-        returns when it is done or refused). Returns (all placed, migrations done, a message)."""
-        moved, notes = 0, []
+        """Order each module to its host (one at a time; the manager's ``~migrate`` returns when it is done or
+        refused, and refuses a module that is already there). The manager is asked every time rather than
+        trusting the last placement message, which may lag behind a migration that just finished. Returns (all
+        placed, migrations done, a message)."""
+        moved, placed, notes = 0, 0, []
         for module, host in hosts.items():
-            here = self._settled(module)
-            if here is None:
+            if self._settled(module) is None:
                 notes.append(f'{module} -> {host}: not ordered (not active anywhere within '
                              f'{self.placement_timeout:g} s)')
-                continue
-            if here == host:
                 continue
             try:
                 res = self.migrate(module, host, '')
@@ -118,14 +117,14 @@ class DeciderNode:
                 continue
             if res.ok and res.outcome == 'done':
                 moved += 1
-                with self.lock:
-                    self.active[module] = host
+                placed += 1
                 notes.append(f'{module} -> {host} in {res.duration:.1f} s')
+            elif res.outcome == 'refused' and f'already on {host}' in res.message:
+                placed += 1
+                notes.append(f'{module} already on {host}')
             else:
                 notes.append(f'{module} -> {host}: {res.outcome} ({res.message})')
-        with self.lock:
-            ok = all(self.active.get(m) == h for m, h in hosts.items())
-        return ok, moved, '; '.join(notes) or 'already placed'
+        return placed == len(hosts), moved, '; '.join(notes)
 
     def _settled(self, module: str) -> Optional[str]:
         """Where ``module`` is active once it is not starting or migrating (waits up to placement_timeout: the
