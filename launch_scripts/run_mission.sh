@@ -5,7 +5,7 @@
 #                                 [--report-dir DIR]
 #   launch_scripts/run_mission.sh --two-host [--placement NAME|FILE] [--scenario ...] [--port P] [--report-dir DIR]
 #                                 [--delay MS] [--rate MBIT] [--loss PCT] [--trace FILE] [--link-map FILE]
-#                                 [--migration [--rule]]
+#                                 [--migration [--rule] | --network-aware [TASK]]
 #
 # Sets up the workspace, starts a master (default port 11311, or --port, or ROS_MASTER_URI), brings up the
 # simulated TurtleBot with the monitoring modules (kestrel_driver, merger, local_mapcell_manager,
@@ -24,17 +24,24 @@
 # (the emulator's delays are wall-clock time). --migration: the modules of config/migration.yaml are started
 # by migration agents where the placement says and can be moved while the mission runs
 # (launch_scripts/migrate.sh; src/migration_manager/README.md); --rule also moves them by the link quality
-# (config/migration.yaml rule). The report adds the placement, link.tsv (conditions and
-# bytes over time) and the bytes over the link.
+# (config/migration.yaml rule). --network-aware [TASK]: network_monitor's migration_decider places the
+# modules of TASK (config/decision.yaml tasks, default patrol: mfg and global_goal_manager) by the learned
+# k-NN decision when the mission starts, re-decides as the link changes and evaluates the mission at its end
+# (default placement all_robot, link map config/link_map_corridor.yaml). The report adds the placement,
+# link.tsv (conditions and bytes over time), the bytes over the link and, network-aware, decisions.tsv.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
-port=""; scenario="corridor"; rtf="5"; report=""; two_host=""; placement="move_base_cloud"; link_args=(); rtf_given=""; migration=()
+port=""; scenario="corridor"; rtf="5"; report=""; two_host=""; placement="move_base_cloud"; link_args=(); rtf_given=""; migration=(); network_aware=""; placement_given=""
 while [ $# -gt 0 ]; do
   case "$1" in
     --two-host) two_host=1; shift ;;
     --migration) migration+=(--migration); two_host=1; shift ;;
     --rule) migration+=(--rule); two_host=1; shift ;;
-    --placement) placement="${2:?}"; two_host=1; shift 2 ;;
+    --network-aware)
+      task=patrol
+      if [ $# -gt 1 ] && [ "${2#-}" = "$2" ]; then task="$2"; shift; fi
+      migration+=(--network-aware "$task"); two_host=1; network_aware=1; shift ;;
+    --placement) placement="${2:?}"; placement_given=1; two_host=1; shift 2 ;;
     --delay|--rate|--loss) link_args+=("$1" "${2:?}"); shift 2 ;;
     --trace|--link-map) link_args+=("$1" "$(realpath -m "${2:?}")"); shift 2 ;;
     --scenario) scenario="${2:?}"; shift 2 ;;
@@ -59,6 +66,10 @@ read -r name map x y a < <(rosrun cnr_mission check_scenario "$scenario_file") |
 # a report folder holds one run: its measurement store and relay queues would be reloaded by the next one
 [ -z "$(ls -A "$report" 2>/dev/null)" ] || cnr_die "report folder $report is not empty (it holds another run; choose another --report-dir)"
 mkdir -p "$report"
+if [ -n "$network_aware" ]; then
+  [ -n "$placement_given" ] || placement=all_robot
+  [ "${#link_args[@]}" -gt 0 ] || link_args=(--link-map "$CNR_WS/config/link_map_corridor.yaml")
+fi
 if [ -n "$two_host" ]; then
   case "$placement" in *.yaml|*.yml|*/*) placement="$(realpath -m "$placement")" ;; esac
   [ -z "$rtf_given" ] || [ "$rtf" = 1 ] || cnr_die "--two-host runs in real time (the link emulator's delays and rates are wall-clock time, the robot's CPU cap is per wall second): --rtf 1 or leave it out"

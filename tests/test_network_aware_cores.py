@@ -111,6 +111,11 @@ def test_mid_task_redecision_waits_for_the_dwell_and_respects_the_budget(tmp_pat
     assert a.observe(GOOD, 40.0) is None and a.observe(GOOD, 50.0) is None  # budget: one per 30 s
     row, _ = a.finish(COMPLETED, 30.0, 0.003, 1.7e9, learn=True)
     assert row.placement == 'move_base=cloud>robot' and row.decision == OFFLOAD
+    # a forced placement is held for the whole task (a paired run measures that placement)
+    a.begin('corridor_round_trip', 'corridor', GOOD, 100.0, force=OFFLOAD)
+    a.placed(100.0, 1)
+    assert all(a.observe(BAD, t) is None for t in (101.0, 120.0, 140.0, 200.0))
+    assert a.finish(COMPLETED, 30.0, 0.003, 1.7e9 + 1, learn=True)[0].placement == 'move_base=cloud'
 
 
 # ---------------------------------------------------------------- tasks and plans
@@ -199,6 +204,7 @@ def test_fits_and_crossings():
     fit = campaign.power_fit([1, 2, 4, 8], [40, 20, 10, 5])
     assert fit[0] == pytest.approx(40) and fit[1] == pytest.approx(-1)
     assert campaign.crossing(fit, 10.0) == pytest.approx(4.0)
+    assert math.isnan(campaign.crossing(fit, 10.0, 1.0, 3.0))         # outside the measured range
     assert campaign.linear_fit([0, 1, 2], [1, 3, 5]) == pytest.approx((1, 2))
     assert campaign.failure_rtt([(10, COMPLETED), (150, ABORTED), (170, ABORTED), (130, COMPLETED)]) == 140.0
     assert math.isnan(campaign.failure_rtt([(10, COMPLETED)]))

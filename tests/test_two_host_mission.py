@@ -145,3 +145,29 @@ def test_the_rule_moves_modules_as_the_link_degrades_and_recovers(tmp_path):
     # on a fresh machine: 1; the monitor, uncapped, connected first)
     assert check['published_before_first'] <= 1, check
     assert 'Traceback' not in out
+
+
+def test_the_network_aware_mission_decides_at_the_start_and_reports_each_decision(tmp_path):
+    """--network-aware patrol on the paper's dead-zone link map: network_monitor's migration_decider decides for
+    the MFG and the global goal manager when the mission starts (an empty training set: the cold-start rule, or
+    an exploration), they are placed accordingly, the link then dies in the middle of the corridor and the
+    hotspot is still found; the report lists each decision with its profile, and the evaluation (none for
+    patrol: its control values are not measured, which the report says)."""
+    status, s, report, out = two_host(tmp_path, 'all_robot', '--network-aware', 'patrol', '--link-map',
+                                      os.path.join(WS, 'config', 'link_map_corridor.yaml'), '--training-dir',
+                                      str(tmp_path / 'training'), timeout=900)
+    assert status == 0, out[-3000:]
+    assert s['found'] and s['two_host']['network_aware'] == 'patrol' and s['two_host']['migration']
+    na = s['network_aware']
+    decided = [d for d in na['decisions'] if d['event'] == 'decided']
+    assert len(decided) == 1 and decided[0]['reason'] in ('cold_start', 'explore'), na
+    d = decided[0]
+    assert d['c_l'] < 0.05, d                  # decided at the start, in the good region by the corridor's end
+    host = 'cloud' if d['decision'] == 'offload' else 'robot'
+    assert d['placement'] == f'mfg={host},global_goal_manager={host}', d
+    with open(os.path.join(report, 'placement.tsv')) as f:
+        rows = [line.split('\t') for line in f.read().splitlines()[1:]]
+    assert host in {r[2] for r in rows if r[1] == 'mfg'}, rows
+    assert os.path.exists(os.path.join(report, 'decisions.tsv'))
+    assert na['evaluation'] and 'no control values' in na['evaluation'], na['evaluation']
+    assert 'network-aware: patrol@corridor' in out and 'Traceback' not in out

@@ -79,7 +79,7 @@ def write_analysis(args: argparse.Namespace) -> int:
     s = cfg.decision
     final = Decider(DecisionSettings(s.k, s.normalisation, s.cold_start, Exploration(0.0, s.exploration.max_rtt, 0)),
                     learned)
-    rtt_axis = np.linspace(0.0, 0.25, 120)
+    rtt_axis = np.linspace(0.0, max([0.25] + [1.05 * t.c_l for t in learned]), 120)
     rbw_axis = np.logspace(-0.5, 3.0, 120)
     grid = np.array([[1.0 if final.policy(x, y).decision == OFFLOAD else 0.0 for x in rtt_axis] for y in rbw_axis])
     fig, ax = plt.subplots(figsize=(6.4, 4.8))
@@ -105,9 +105,10 @@ def write_analysis(args: argparse.Namespace) -> int:
     placing = [_num(r, 'placing_time') for r in offload_rows if _num(r, 'placing_time') > 0]
     migration_time = statistics.median(placing) if placing else math.nan
     fit = core.power_fit(x, y)
-    cross = core.crossing(fit, control.ct_mean) if fit else math.nan
-    cross_mig = core.crossing(fit, control.ct_mean - migration_time) if fit and math.isfinite(migration_time) \
-        else math.nan
+    x_lo, x_hi = (min(x), max(x)) if x else (0.0, 0.0)
+    cross = core.crossing(fit, control.ct_mean, x_lo, x_hi) if fit else math.nan
+    cross_mig = core.crossing(fit, control.ct_mean - migration_time, x_lo, x_hi) \
+        if fit and math.isfinite(migration_time) else math.nan
     fig, ax = plt.subplots(figsize=(6.4, 4.8))
     ax.scatter(x, y, s=14, label='offloaded runs (completed)')
     ax.axhline(control.ct_mean, color='k', ls='--', label=f'CT = {control.ct_mean:.1f} s (all local)')
@@ -145,6 +146,8 @@ def write_analysis(args: argparse.Namespace) -> int:
     xr = [_num(r, 'c_l') * 1000 for r in done_off]
     lin = core.linear_fit(xr, y)
     cross_rtt = (control.ct_mean - lin[0]) / lin[1] if lin and lin[1] > 0 else math.nan
+    if not (xr and min(xr) <= cross_rtt <= max(xr)):
+        cross_rtt = math.nan            # not within the measured RTTs: no extrapolation
     fail_rtt = core.failure_rtt([(_num(r, 'rtt_ms'), r['mission_status']) for r in offload_rows])
     failed = [r for r in offload_rows if r['mission_status'] != COMPLETED]
     fig, ax = plt.subplots(figsize=(6.4, 4.8))
@@ -221,10 +224,15 @@ def write_analysis(args: argparse.Namespace) -> int:
         f'| best static threshold, same rows | MALMOS: k-NN +10.9–40.5 points | '
         f'{_fmt(100 * last["static"], 0) if last else "–"} % (RTT < {_fmt(1000 * last["rule_rtt"], 0) if last else "–"} '
         f'ms, R_bw > {_fmt(last["rule_r_bw"], 2) if last else "–"}) |',
-        f'| Fig. 5-2: R_bw where offloading matches CT | ≈ 4.9 | {_fmt(cross, 2)} |',
+        f'| offloaded runs faster than CT / cheaper than CB | (thesis: above R_bw ≈ 4.9 / most runs) | '
+        f'{sum(1 for v in y if v < control.ct_mean)} of {len(y)} / '
+        f'{sum(1 for r in done_off if _num(r, "b_task") < control.cb_mean)} of {len(done_off)} |',
+        f'| Fig. 5-2: R_bw where offloading matches CT (– : no crossing within the measured R_bw) | ≈ 4.9 | '
+        f'{_fmt(cross, 2)} |',
         f'| same, with the measured migration time ({_fmt(migration_time)} s, median placing time) | ≈ 10 (5 s) | '
         f'{_fmt(cross_mig, 2)} |',
-        f'| Fig. 5-4: RTT where offloading matches CT | ≈ 55 ms | {_fmt(cross_rtt)} ms |',
+        f'| Fig. 5-4: RTT where offloading matches CT (– : none within the measured RTTs) | ≈ 55 ms | '
+        f'{_fmt(cross_rtt)} ms |',
         f'| RTT from which remote move_base fails | ≈ 160 ms | {_fmt(fail_rtt, 0)} ms |',
         f'| Fig. 5-5: battery, remote vs local (good links, {len(good)} pairs) | −10 % | {_fmt(db)} % |',
         f'| Fig. 5-6: task time, remote − local | −2.4 s | {_fmt(dt)} s |',

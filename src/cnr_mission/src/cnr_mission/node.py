@@ -25,8 +25,8 @@ from cnr_maps.measurements import Measurement, write_tsv
 from cnr_mission.core.report import CellSummary, check_store, path_length, render_png, write_summary
 from cnr_mission.core.scenario import read_mission
 from cnr_msgs.msg import (BatteryEnergy, CellStates, Hotspot, MergedMeasurement, MfgActivity, MigrationEvent,
-                          NetworkProfile, Placement, SearchState, StoreForwardStatus)
-from cnr_msgs.srv import GetMeasurements
+                          NetworkProfile, Placement, SearchState, StoreForwardStatus, TaskDecision)
+from cnr_msgs.srv import Decide, EvaluateTask, GetMeasurements
 from cnr_params import ConfigError
 from cnr_params.ros import init_node, private_section
 from kestrel_driver.core.field import TemperatureField
@@ -82,6 +82,15 @@ class MissionMonitor:
         self.current_placement: Dict[str, Tuple[str, int]] = {}
         rospy.Subscriber('/migration_manager/events', MigrationEvent, self._on_migration, queue_size=100)
         rospy.Subscriber('/migration_manager/placement', Placement, self._on_placement, queue_size=10)
+        # the network-aware mission: network_monitor's migration_decider places the task's modules at the start,
+        # re-decides while the mission runs and evaluates the mission at its end ('' = no decider)
+        self.decider = p.string('decider').rstrip('/')
+        self.decision_task = p.string('decision_task')
+        self.decisions: List[Dict] = []
+        self.evaluation: Optional[str] = None
+        if self.decider:
+            rospy.Subscriber(f'{self.decider}/decisions', TaskDecision, self._on_decision, queue_size=20)
+            threading.Thread(target=self._decide, daemon=True).start()
         # ends the mission now (report written as at a timeout; a benchmark that runs the mission as a workload)
         self.finish_requested = threading.Event()
         rospy.Service('~finish', Trigger, self._on_finish)
@@ -122,6 +131,44 @@ class MissionMonitor:
     def _sim_since_start(self) -> float:
         now = rospy.Time.now().to_sec()
         return now - (self.start_sim if self.start_sim is not None else now)
+
+    def _on_decision(self, msg: TaskDecision) -> None:
+        entry = dict(time=self._sim_since_start(), event=msg.event, decision=msg.decision, reason=msg.reason,
+                     policy=msg.policy, confidence=msg.confidence, votes_offload=msg.votes_offload,
+                     votes_onload=msg.votes_onload, c_l=msg.c_l, r_bw=msg.r_bw, loss=msg.loss,
+                     profile_method=msg.profile_method, placement=msg.placement, placed=msg.placed,
+                     placing_time=msg.placing_time, value=msg.value, label=msg.label, message=msg.message)
+        with self.lock:
+            self.decisions.append(entry)
+        if msg.event == 'redecided':
+            self._say(f'network-aware: re-decided during the mission: {msg.decision} ({msg.message})')
+
+    def _decide(self) -> None:
+        """The decision before the task (in a thread: the monitor goes on reporting meanwhile)."""
+        try:
+            rospy.wait_for_service(f'{self.decider}/decide', 300.0)
+            res = rospy.ServiceProxy(f'{self.decider}/decide', Decide)(self.decision_task, self.name, '', True, True)
+            self._say(f'network-aware: {self.decision_task}@{self.name}: ' + res.message)
+        except (rospy.ROSException, rospy.ServiceException) as exc:
+            if not rospy.is_shutdown():
+                self._say(f'network-aware: no decision ({exc}); the modules stay where they started')
+
+    def evaluate_decision(self, found: bool) -> None:
+        """Eq. 4-5 for the mission's decision (network_monitor's ~evaluate): completed when the hotspot was
+        found, else timed out; T = sim time to the hotspot (or the whole mission), B = battery used."""
+        if not self.decider or not any(d['event'] == 'decided' for d in self.decisions):
+            return
+        h, b0, b1 = self.hotspot, self.battery_first, self.battery_last
+        t = h.header.stamp.to_sec() - self.start_sim if h is not None and self.start_sim is not None \
+            else self._sim_since_start()
+        b = b0.percentage - b1.percentage if b0 is not None and b1 is not None else 0.0
+        try:
+            res = rospy.ServiceProxy(f'{self.decider}/evaluate', EvaluateTask)(
+                'completed' if found else 'timed_out', t, b, True)
+            self.evaluation = res.message if res.ok else f'not evaluated: {res.message}'
+        except (rospy.ROSException, rospy.ServiceException) as exc:
+            self.evaluation = f'not evaluated: {exc}'
+        self._say(f'network-aware: {self.evaluation}')
 
     def _on_migration(self, msg: MigrationEvent) -> None:
         if msg.step not in ('done', 'rolled_back', 'failed'):
@@ -224,6 +271,14 @@ class MissionMonitor:
                     f.write('\t'.join(f'{v:.6g}' for v in row) + '\n')
         with self.lock:
             migrations, placements = list(self.migrations), list(self.placements)
+            decisions = list(self.decisions)
+        if decisions:    # each decision with its profile, placement and evaluation (network_monitor)
+            keys = list(decisions[0])
+            with open(os.path.join(self.report_dir, 'decisions.tsv'), 'w') as f:
+                f.write('\t'.join(keys) + '\n')
+                for d in decisions:
+                    f.write('\t'.join(f'{d[k]:.6g}' if isinstance(d[k], float) else str(d[k]).replace('\t', ' ')
+                                      for k in keys) + '\n')
         if placements:   # where each managed module was active over the mission ('' = none: migrating)
             with open(os.path.join(self.report_dir, 'placement.tsv'), 'w') as f:
                 f.write('time\tmodule\thost\tterm\n')
@@ -257,6 +312,10 @@ class MissionMonitor:
             measurements_taken=len(records) or self.measurements,
             measurements_published_on_robot=self.measurements,
             store_check=store_check,
+            network_aware=None if not self.decider else dict(
+                task=self.decision_task, decisions_tsv='decisions.tsv', evaluation=self.evaluation,
+                decisions=[{k: d[k] for k in ('time', 'event', 'decision', 'reason', 'c_l', 'r_bw', 'placement')}
+                           for d in decisions]),
             store_and_forward=None if self.relay is None else {
                 k: getattr(self.relay, k) for k in ('stream', 'epoch', 'last_seq', 'acked_seq', 'queued', 'appended',
                                                     'sent', 'resent', 'timeouts', 'full', 'rejected')},
@@ -299,6 +358,7 @@ def main() -> None:
     if rospy.is_shutdown():
         return
     mon.drain_relay()
+    mon.evaluate_decision(found)
     path = mon.write_report(found)
     print(f'[mission] report written to {path}', flush=True)
     rospy.signal_shutdown('mission over')

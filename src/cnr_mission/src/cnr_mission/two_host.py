@@ -14,6 +14,12 @@ What runs where:
 * **cloud namespace**: the cloud's rosmaster, bridge, network_monitor and the modules placed on the cloud (with
   a map_server of its own when move_base runs there).
 
+With ``--network-aware TASK`` (implies ``--migration``) the robot also runs network_monitor's migration_decider:
+the mission monitor asks it to decide for TASK (config/decision.yaml ``tasks``, e.g. patrol: mfg and
+global_goal_manager) when the mission starts, the decider re-decides as the link changes, and the monitor asks
+for the evaluation (Eq. 4-5) at the end; every decision is in the report (``decisions.tsv``). With
+``--task-plan`` the two-host mission runs a plan of tasks instead (:class:`TaskMode`).
+
 With ``--migration`` the modules of config/migration.yaml are managed: a migration agent on each host starts
 them, the migration manager (robot, inside the cap) places them where the placement says at the start and moves
 them when asked (``migrate.sh``, or the configured rule); both hosts' bridges then carry every name a managed
@@ -53,6 +59,7 @@ from cnr_testbed.rosside import RosSide, bridge_config
 from migration_manager.cli import parse_placement
 
 EXIT_INTERRUPTED = 130
+DECIDER = '/migration_decider'          # network_monitor's migration_decider on the robot (host.launch decider)
 EXIT_NOT_FOUND = 3
 # roslaunch's lines that say nothing to a person watching a mission (as run_mission.sh filters them)
 _NOISE = re.compile(r'^( \* /|\s*$|.*rosdep view is empty)')
@@ -93,11 +100,13 @@ class TwoHostMission:
     def __init__(self, ws_config: str, scenario_file: str, map_file: str, start: List[str], placement: Placement,
                  report_dir: str, port: int, link: Dict[str, float], trace: Optional[str],
                  link_map: Optional[str], migration: bool = False, rule: bool = False,
-                 task: Optional[TaskMode] = None) -> None:
+                 task: Optional[TaskMode] = None, network_aware: str = '') -> None:
         self.config = ws_config
         self.scenario_file, self.map_file, self.start = scenario_file, map_file, start
         self.task = task
-        self.migration = migration or rule or task is not None
+        self.network_aware = network_aware
+        self.training_dir, self.control_values = '', ''      # '' = config/decision.yaml's
+        self.migration = migration or rule or task is not None or bool(network_aware)
         self.rule = rule
         if self.migration:
             from migration_manager.core.config import from_section
@@ -208,7 +217,9 @@ class TwoHostMission:
                                            'relay_status_topic:=' + ('/store_forward_sender/status'
                                                                      if self.placement.relayed() else ''),
                                            f'relay_drain_timeout:={self.relay_drain_timeout}',
-                                           *(self.task.world_args(self.testbed.config_path) if self.task else [])],
+                                           *(self.task.world_args(self.testbed.config_path) if self.task else []),
+                                           *([f'decider:={DECIDER}', f'decision_task:={self.network_aware}']
+                                             if self.network_aware else [])],
                      until='task_runner' if self.task else 'mission_monitor')
         for side, peer in ((self.robot, self.cloud), (self.cloud, self.robot)):
             store = f'store_{side.side}.tsv' if self.migration else 'store.tsv'
@@ -235,6 +246,9 @@ class TwoHostMission:
                 host_args.append('map_server:=true')
             if self.task:
                 host_args = self.task.host_args(host_args)
+            elif self.network_aware:
+                host_args += ['decider:=true', f'training_dir:={self.training_dir}',
+                              f'control_values:={self.control_values}']
             self._launch(side, f'host_{side.side}', host_args,
                          prefix=self._robot_cpu() if side.side == 'robot' else None)
         tb_cli = [sys.executable, '-m', 'cnr_testbed.cli', '--config', self.testbed.config_path]
@@ -405,7 +419,11 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
                     'migration_manager (start where --placement says, move at run time)')
     ap.add_argument('--rule', action='store_true', help='--migration, and migration_rule moves modules by the link '
                     'quality (config/migration.yaml rule)')
-    task = ap.add_argument_group('task mode (exp_control.sh, exp_campaign.sh)')
+    ap.add_argument('--network-aware', metavar='TASK', default='',
+                    help='--migration, and network_monitor\'s migration_decider places the modules of TASK '
+                         '(config/decision.yaml tasks, e.g. patrol) at the start, re-decides while the mission runs '
+                         'and evaluates it at the end')
+    task = ap.add_argument_group('task mode (exp_control.sh, exp_campaign.sh) and --network-aware')
     task.add_argument('--task-plan', help='run this plan of tasks (cnr_mission.core.task) instead of the mission')
     task.add_argument('--task-results', help='results TSV the runs are appended to (resumes after its last run)')
     task.add_argument('--training-dir', default='', help="the decider's training sets ('' = config/decision.yaml's)")
@@ -431,6 +449,20 @@ def task_mode(args: argparse.Namespace) -> Optional[TaskMode]:
                     os.path.abspath(args.control_values) if args.control_values else '')
 
 
+def network_aware(args: argparse.Namespace) -> str:
+    """The task of ``--network-aware`` after checking it against config/decision.yaml ('' = none)."""
+    if not args.network_aware:
+        return ''
+    from network_monitor.core.decision_config import load_decision_config
+    cfg = load_decision_config(os.path.join(args.config_dir, 'decision.yaml'))
+    if args.network_aware not in cfg.tasks:
+        raise ConfigError('two_host_mission', '--network-aware', f'{args.network_aware!r} is not a task of '
+                                                                 f'config/decision.yaml ({", ".join(cfg.tasks)})')
+    if args.task_plan:
+        raise ConfigError('two_host_mission', '--network-aware', 'not with --task-plan (the plan decides itself)')
+    return args.network_aware
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     args = parse_args(argv)
     try:
@@ -451,7 +483,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     try:
         mission = TwoHostMission(args.config_dir, args.scenario, args.map, args.start, placement, args.report_dir,
                                  args.port, link, args.trace, args.link_map, args.migration, args.rule,
-                                 task_mode(args))
+                                 task_mode(args), network_aware(args))
+        mission.training_dir = os.path.abspath(args.training_dir) if args.training_dir else ''
+        mission.control_values = os.path.abspath(args.control_values) if args.control_values else ''
     except ConfigError as exc:
         print(f'two_host_mission: {exc}', file=sys.stderr)
         return EXIT_CONFIG
@@ -479,6 +513,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     if status in (0, EXIT_NOT_FOUND) and mission.task is None:
         amend_summary(args.report_dir, dict(
             two_host=dict(placement=placement.name, hosts=placement.as_dict(), migration=mission.migration, rule=args.rule,
+                          network_aware=args.network_aware or None,
                           managed=list(mission.placement.managed),
                           bridged_topics=mission.placement.allow('topics'),
                           bridged_services=mission.placement.allow('services'),

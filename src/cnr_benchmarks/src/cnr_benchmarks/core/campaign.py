@@ -185,12 +185,13 @@ def power_fit(x: Sequence[float], y: Sequence[float]) -> Optional[Tuple[float, f
     return math.exp(my - slope * mx), slope
 
 
-def crossing(fit: Tuple[float, float], level: float) -> float:
-    """x where a x^b = level (NaN if the fit is flat)."""
+def crossing(fit: Tuple[float, float], level: float, lo: float = 0.0, hi: float = math.inf) -> float:
+    """x where a x^b = level, if it lies in [lo, hi] (the measured range: no extrapolation); else NaN."""
     a, b = fit
     if b == 0 or a <= 0 or level <= 0:
         return math.nan
-    return (level / a) ** (1.0 / b)
+    x = (level / a) ** (1.0 / b)
+    return x if lo <= x <= hi else math.nan
 
 
 def linear_fit(x: Sequence[float], y: Sequence[float]) -> Optional[Tuple[float, float]]:

@@ -11,7 +11,7 @@ retrained after each row appended) and, while a task runs, a :class:`~network_mo
 
 A *forced* placement (control runs, the second run of a paired condition) is run and evaluated like a decision
 (``reason`` ``forced``); it is marked ``explored`` when it differs from what the policy would have chosen, as an
-exploration is. The row records the placement at the start and each mid-task change (``move_base=cloud>robot``).
+exploration is. Forced and explored placements are not re-decided during the task. The row records the placement at the start and each mid-task change (``move_base=cloud>robot``).
 """
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ import random
 from dataclasses import dataclass, field
 from typing import Dict, List, Optional, Tuple
 
-from network_monitor.core.decision import NO_PROFILE, Decider, Decision
+from network_monitor.core.decision import EXPLORE, NO_PROFILE, Decider, Decision
 from network_monitor.core.decision_config import DecisionConfig
 from network_monitor.core.evaluation import (DECISIONS, ONLOAD, ControlValues, evaluate, load_control_values)
 from network_monitor.core.hysteresis import ReDecider
@@ -123,8 +123,12 @@ class TaskAdvisor:
         return {m: host for m in self.cfg.tasks[task]}
 
     def placed(self, now: float, moved: int) -> None:
-        """The placement before the task is made (``moved`` migrations); re-deciding starts now."""
+        """The placement before the task is made (``moved`` migrations); re-deciding starts now, unless the
+        placement was forced or explored: that one is held for the whole task, so that its outcome measures it
+        (a paired run's oracle, an exploration's lesson)."""
         r = self._need_running()
+        if r.decision.reason in (FORCED, EXPLORE):
+            return
         r.redecider = ReDecider(self.cfg.redecision, r.placement)
         for _ in range(moved):
             r.redecider.migrated(now)
