@@ -208,3 +208,33 @@ def test_fits_and_crossings():
     assert campaign.linear_fit([0, 1, 2], [1, 3, 5]) == pytest.approx((1, 2))
     assert campaign.failure_rtt([(10, COMPLETED), (150, ABORTED), (170, ABORTED), (130, COMPLETED)]) == 140.0
     assert math.isnan(campaign.failure_rtt([(10, COMPLETED)]))
+
+
+# ---------------------------------------------------------------- shared knowledge on the command line
+def test_an_exported_and_imported_set_decides_like_the_one_it_came_from(tmp_path, capsys):
+    from network_monitor.training_cli import main as training
+    from test_network_monitor_decision import random_rows
+    config = os.path.join(WS, 'config', 'decision.yaml')
+    a, b = str(tmp_path / 'robot_a'), str(tmp_path / 'robot_b')
+    TrainingSet(a, 'corridor_round_trip', 'corridor').append(*random_rows(40, seed=5, inside=True))
+    exported = str(tmp_path / 'shared' / 'a.tsv')
+    assert training(['--config', config, '--dir', a, 'export', 'corridor_round_trip', 'corridor', exported]) == 0
+    assert training(['--config', config, '--dir', b, 'import', 'corridor_round_trip', 'corridor', exported,
+                     'robot_a']) == 0
+    assert '40 added' in capsys.readouterr().out
+    assert training(['--config', config, '--dir', b, 'import', 'corridor_round_trip', 'corridor', exported,
+                     'robot_a']) == 0
+    assert '0 added, 40 already there' in capsys.readouterr().out
+    for rtt_ms, r_bw in ((10, 80.0), (90, 6.0), (150, 2.0), (300, 50.0), (40, 1.5)):
+        outs = []
+        for d in (a, b):
+            assert training(['--config', config, '--dir', d, 'decide', 'corridor_round_trip', 'corridor',
+                             str(rtt_ms), str(r_bw)]) == 0
+            outs.append(capsys.readouterr().out)
+        assert outs[0] == outs[1] and '(knn' in outs[0], outs
+    rows, _ = TrainingSet(b, 'corridor_round_trip', 'corridor').read()
+    assert {r.source for r in rows} == {'imported:robot_a'}
+    assert training(['--config', config, '--dir', b, 'list']) == 0
+    assert 'corridor_round_trip@corridor\t40 rows' in capsys.readouterr().out
+    assert training(['--config', config, '--dir', b, 'show', 'nope', 'corridor']) == 2      # one line, status 2
+    assert 'unknown task' in capsys.readouterr().err
