@@ -149,8 +149,8 @@ def test_the_rule_moves_modules_as_the_link_degrades_and_recovers(tmp_path):
 
 def test_the_network_aware_mission_decides_at_the_start_and_reports_each_decision(tmp_path):
     """--network-aware patrol on the paper's dead-zone link map: network_monitor's migration_decider decides for
-    the MFG and the global goal manager when the mission starts (an empty training set: the cold-start rule, or
-    an exploration), they are placed accordingly, the link then dies in the middle of the corridor and the
+    the MFG and the global goal manager when the mission starts (an empty training set: the cold-start rule, an
+    exploration, or no usable profile), they are placed accordingly, the link then dies in the middle of the corridor and the
     hotspot is still found; the report lists each decision with its profile, and the evaluation (none for
     patrol: its control values are not measured, which the report says)."""
     status, s, report, out = two_host(tmp_path, 'all_robot', '--network-aware', 'patrol', '--link-map',
@@ -160,7 +160,9 @@ def test_the_network_aware_mission_decides_at_the_start_and_reports_each_decisio
     assert s['found'] and s['two_host']['network_aware'] == 'patrol' and s['two_host']['migration']
     na = s['network_aware']
     decided = [d for d in na['decisions'] if d['event'] == 'decided']
-    assert len(decided) == 1 and decided[0]['reason'] in ('cold_start', 'explore'), na
+    # the cold-start rule, an exploration, or - when the start-up probe found no A_bw (the capped robot busy
+    # starting its modules; seen once) - no usable profile: the robot
+    assert len(decided) == 1 and decided[0]['reason'] in ('cold_start', 'explore', 'no_profile'), na
     d = decided[0]
     assert d['c_l'] < 0.05, d                  # decided at the start, in the good region by the corridor's end
     host = 'cloud' if d['decision'] == 'offload' else 'robot'
