@@ -8,7 +8,7 @@ import math
 import os
 import statistics
 import sys
-from typing import Dict, List, Sequence
+from typing import Dict, Sequence
 
 import matplotlib
 

@@ -173,16 +173,9 @@ def learning_curve(rows: Sequence[Row], train_conditions: int, held_out: Sequenc
 
 def power_fit(x: Sequence[float], y: Sequence[float]) -> Optional[Tuple[float, float]]:
     """y = a x^b by least squares in log-log (positive values only); None with fewer than 3 points."""
-    pts = [(math.log(a), math.log(b)) for a, b in zip(x, y) if a > 0 and b > 0 and math.isfinite(a + b)]
-    if len(pts) < 3:
-        return None
-    mx = sum(p[0] for p in pts) / len(pts)
-    my = sum(p[1] for p in pts) / len(pts)
-    sxx = sum((p[0] - mx) ** 2 for p in pts)
-    if sxx == 0:
-        return None
-    slope = sum((p[0] - mx) * (p[1] - my) for p in pts) / sxx
-    return math.exp(my - slope * mx), slope
+    pts = [(math.log(u), math.log(v)) for u, v in zip(x, y) if u > 0 and v > 0 and math.isfinite(u + v)]
+    fit = linear_fit([p[0] for p in pts], [p[1] for p in pts])
+    return None if fit is None else (math.exp(fit[0]), fit[1])
 
 
 def crossing(fit: Tuple[float, float], level: float, lo: float = 0.0, hi: float = math.inf) -> float:
