@@ -55,6 +55,8 @@ def bridged(hosts):
     yield tb, robot, cloud, procs
     for side, proc in ((robot, procs[0]), (cloud, procs[1])):
         side.stop_proc(proc)
+        # a bridge that hung on SIGINT (SIGKILLed at last) would leave its proxies to the next test
+        assert proc.returncode == 0, f"bridge_{side.side} did not exit cleanly on SIGINT: " + log(proc)[-2000:]
     for side in (robot, cloud):
         for proc in list(side.procs):
             if proc is not side.master:

@@ -131,8 +131,10 @@ class Bridge:
         self.last_node_refresh = -math.inf
         self.master_ok = True
         self.stopped = False
-        # rospy runs on_shutdown hooks before is_shutdown() turns true: the spin loop may still be in
-        # reconcile(). Registrations change only under this lock, and not at all once ``closing`` is set.
+        # rospy runs on_shutdown hooks in its SIGINT handler, i.e. in the main thread, possibly in the
+        # middle of reconcile(): the hook only sets ``closing`` (taking a lock there could deadlock), and
+        # spin() removes the registrations once its loop has ended. Registrations change only under this
+        # lock, and not at all once ``closing`` is set.
         self.registry_lock = threading.Lock()
         self.closing = False
         self.quality_pub = rospy.Publisher('link_quality', LinkQuality, queue_size=10)
@@ -357,9 +359,23 @@ class Bridge:
         period = 1.0 / self.cfg.poll_rate
         hb_period = 1.0 / self.cfg.heartbeat_rate
         q_period = 1.0 / self.cfg.quality_rate
-        next_poll = next_hb = next_q = time.monotonic()
         rospy.loginfo(f'bridge {self.cfg.name}: listening on {self.cfg.listen[0]}:{self.cfg.listen[1]}, '
                       f'peers ' + ', '.join(f'{p.name}@{p.host}:{p.port}' for p in self.cfg.peers))
+        try:
+            self._loop(period, hb_period, q_period)
+        finally:
+            self.shutdown()
+
+    def request_stop(self) -> None:
+        """rospy.on_shutdown hook: end spin(), which then removes the registrations.
+
+        Only a flag: the hook may run in a signal handler inside any lock of the main thread (even the
+        wake event's own); the loop waits at most one heartbeat period, so it sees the flag within that.
+        """
+        self.closing = True
+
+    def _loop(self, period: float, hb_period: float, q_period: float) -> None:
+        next_poll = next_hb = next_q = time.monotonic()
         while not rospy.is_shutdown() and not self.closing:
             now = time.monotonic()
             if now >= next_hb:
@@ -389,7 +405,7 @@ class Bridge:
             self.wake.wait(max(0.0, min(next_poll, next_hb, next_q) - time.monotonic()))
 
     def shutdown(self) -> None:
-        """Say goodbye and remove every registration this bridge made."""
+        """Say goodbye and remove every registration this bridge made (called by spin() as it ends)."""
         with self.registry_lock:
             self.closing = True
             with self.lock:
@@ -414,5 +430,5 @@ def main() -> None:
     except OSError as exc:
         raise bridge_config.ConfigError(rospy.resolve_name('~'), 'listen',
                                         f'cannot bind {cfg.listen[0]}:{cfg.listen[1]}: {exc.strerror}') from None
-    rospy.on_shutdown(bridge.shutdown)
+    rospy.on_shutdown(bridge.request_stop)
     bridge.spin()
