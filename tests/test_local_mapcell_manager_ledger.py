@@ -9,7 +9,9 @@ import pytest
 
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.measurements import HEADER, HEADER_LINE, format_row, read_tsv
-from local_mapcell_manager.core.ledger import DUPLICATE, OUTSIDE, STORED, Dedup, Ledger, Reading, parse_state
+from local_mapcell_manager.core.ledger import (DUPLICATE, OUTSIDE, STORED, Dedup, Ledger, Reading, parse_state,
+                                               state_newest)
+from merger.core.retention import Retention
 from local_mapcell_manager.core.store import MeasurementStore
 from migration_manager.core import state as codec
 
@@ -282,6 +284,88 @@ def test_the_buffer_keeps_the_newest_and_warns_once(tmp_path):
     b.activated()
     assert [m.time for m in b.measurements()] == [reading(i).time for i in range(8, 13)]
     assert b.mode == 'active' and not b.buffer
+
+
+# -- recovery from the merger's retention (a failover) ----------------------------------------------
+@pytest.mark.parametrize('j,k,m,c', [(5, 12, 20, 24), (0, 10, 25, 25), (11, 11, 30, 33), (12, 20, 21, 21),
+                                     (3, 8, 35, 35), (None, 6, 9, 14)])
+def test_a_failover_from_a_replicated_state_recovers_what_no_instance_received(tmp_path, j, k, m, c):
+    """A is active until the stream's item k (then cut off); its last replicated state was taken after item j
+    (None: before any); B subscribes at item m, asks the merger at item c, is promoted with that state and goes
+    on: B's store is the one an instance that never moved would have."""
+    s, ref = stream(), reference(tmp_path)
+    merger = Retention(10000, 1e6)
+    a, b = ledger(tmp_path, 'a'), ledger(tmp_path, 'b', active=False)
+    state = wire(a.state())
+    for i, r in enumerate(s):
+        merger.add(r.time, r)
+        if i < k:
+            a.receive(r)
+            if i == j:
+                state = wire(a.state())
+        if m <= i < c:
+            b.receive(r)
+        if i + 1 == c:
+            break
+    since = b.missing_since(state_newest(state))
+    assert since is not None, 'the buffer does not reach back to the state: a gap to recover'
+    b.recover([r for _, r in merger.since(since)])
+    b.restore(state)
+    b.activated()
+    for r in s[c:]:
+        b.receive(r)
+    assert rows(b) == rows(ref) and cells(b) == cells(ref)
+    # without the recovery the measurements between the state and B's subscription would be missing
+    if j is not None and m > j + 2:
+        lost = ledger(tmp_path, 'lost', active=False)
+        for r in s[m:c]:
+            lost.receive(r)
+        lost.restore(state)
+        lost.activated()
+        assert len(rows(lost)) < len(rows(ref))
+
+
+def test_no_recovery_when_the_buffer_reaches_back_to_the_state(tmp_path):
+    s = stream()
+    a, b = ledger(tmp_path, 'a'), ledger(tmp_path, 'b', active=False)
+    for r in s[:10]:
+        a.receive(r)
+    for r in s[8:14]:                               # B subscribed before A's newest
+        b.receive(r)
+    assert b.missing_since(state_newest(a.state())) is None
+    assert b.missing_since(None) == 0.0             # nothing stored anywhere: everything retained
+    empty = ledger(tmp_path, 'empty', active=False)
+    assert empty.missing_since(3.0) == 3.0          # nothing buffered yet
+
+
+@pytest.mark.parametrize('state', [None, {}, {'newest': None}, {'newest': {'time': 'x'}}, {'newest': {'time': None}},
+                                   {'newest': {'time': float('nan')}}, {'newest': {'time': True}}])
+def test_state_newest_of_a_malformed_state_is_none(state):
+    assert state_newest(state) is None
+
+
+def test_recover_puts_the_retained_readings_ahead_of_the_buffer_once(tmp_path):
+    b = ledger(tmp_path, 'b', buffer_size=6, active=False, warn=(warnings := []).append)
+    for i in (5, 6, 7):
+        b.receive(reading(i))
+    assert b.recover([reading(i) for i in (2, 3, 4, 5, 6)]) == 3
+    assert [r.time for r in b.buffer] == [reading(i).time for i in (2, 3, 4, 5, 6, 7)]
+    assert b.recover([reading(i) for i in (1, 2)]) == 1 and len(warnings) == 1 and b.buffer_dropped == 1
+    assert [r.time for r in b.buffer] == [reading(i).time for i in (2, 3, 4, 5, 6, 7)]
+
+
+def test_the_merger_retention_keeps_publication_order_within_its_bounds():
+    r = Retention(4, 10.0)
+    for stamp in (1.0, 2.0, 1.5, 3.0):
+        r.add(stamp, f'm{stamp}')
+    assert [item for _, item in r.since(1.5)] == ['m2.0', 'm1.5', 'm3.0'] and r.oldest == 1.0
+    r.add(4.0, 'm4.0')                              # count bound: the oldest published goes
+    assert len(r) == 4 and r.evicted == 1 and r.oldest == 1.5
+    r.add(13.0, 'm13.0')                            # age bound: stamped more than 10 s before the newest (3.0 is not)
+    assert [item for _, item in r.since(0.0)] == ['m3.0', 'm4.0', 'm13.0'] and r.evicted == 3
+    assert r.since(14.0) == []
+    with pytest.raises(ValueError):
+        Retention(0, 1.0)
 
 
 # -- the store's rewrite ---------------------------------------------------------------------------

@@ -246,3 +246,94 @@ def test_a_lapsed_lease_holds_the_output_back_and_the_service_refuses(lmm, ros):
     res = get_measurements(MODULE)
     assert res.success and [msg_key(m) for m in res.measurements] == stream.sent
     assert proc.alive() and 'Traceback' not in proc.output()
+
+
+class Feed:
+    """The real merger's inputs: ground-truth poses at 20 Hz and temperatures at 5 Hz (stamps from 1000 s on,
+    0.05 s apart: the session's master has sim time and no clock here), along the corridor's cells; records
+    every merged measurement the merger publishes."""
+
+    def __init__(self):
+        from cnr_msgs.msg import MergedMeasurement
+        from nav_msgs.msg import Odometry
+        from sensor_msgs.msg import Temperature
+        self.pose_pub = rospy.Publisher('/base_pose_ground_truth', Odometry, queue_size=100)
+        self.temp_pub = rospy.Publisher('/temperature', Temperature, queue_size=100)
+        self.merged = []
+        self.lock = threading.Lock()
+        self.sub = rospy.Subscriber('/merged_measurements', MergedMeasurement, self._on_merged, queue_size=1000)
+        self.running = True
+        self.thread = threading.Thread(target=self._loop, daemon=True)
+        self.thread.start()
+
+    def _on_merged(self, m):
+        with self.lock:
+            self.merged.append(msg_key(m))
+
+    def _loop(self):
+        from nav_msgs.msg import Odometry
+        from sensor_msgs.msg import Temperature
+        i = 0
+        while self.running:
+            i += 1
+            now = rospy.Time.from_sec(1000.0 + 0.05 * i)
+            odom = Odometry()
+            odom.header.stamp, odom.header.frame_id = now, 'map'
+            odom.pose.pose.position.x, odom.pose.pose.position.y = 0.5 + (i * 0.05) % 10, 0.5
+            odom.pose.pose.orientation.w = 1.0
+            self.pose_pub.publish(odom)
+            if i % 4 == 0:
+                t = Temperature(temperature=22.0 + 0.01 * (i % 100))
+                t.header.stamp = now - rospy.Duration(0.02)
+                self.temp_pub.publish(t)
+            time.sleep(0.05)
+
+    def count(self):
+        with self.lock:
+            return len(self.merged)
+
+    def close(self):
+        self.running = False
+        self.thread.join(5)
+        for x in (self.sub, self.pose_pub, self.temp_pub):
+            x.unregister()
+
+
+def test_a_failover_recovers_from_the_merger_what_no_instance_received(lmm, ros, workspace):
+    """A (active) is lost without a freeze; the merger goes on publishing while no store receives; B, started
+    late, is promoted with A's last replicated state and asks the real merger (``~recent``) for what came
+    after it: B's store holds every merged measurement once, in order."""
+    from cnr_params import load_yaml
+    start, driver, _stream, tmp = lmm
+    ros.master.call('setParam', '/merger', dict(load_yaml(os.path.join(workspace, 'config', 'merger.yaml'))))
+    merger = ros.master.run(['rosrun', 'merger', 'merger'], 'merger')
+    feed = Feed()
+    try:
+        proc_a = start('robot')
+        driver.promote(host='robot')
+        driver.wait_active(10, host='robot')
+        wait_until(lambda: feed.count() >= 5, 30, 'the merger to publish')
+        stored_a = wait_until(lambda: stored(MODULE, 5), 10, 'A to store').measurements
+        replicated = driver.state(host='robot')                   # the newest state the manager holds
+        ros.master.stop_child(proc_a)                             # A is lost (its host cut off): no freeze
+        lost_from = len(replicated['measurements']['time'])
+        published_at_loss = feed.count()
+        wait_until(lambda: feed.count() >= published_at_loss + 8, 30, 'measurements no store receives')
+        proc_b = start('cloud')                                   # B subscribes only now
+        wait_until(lambda: driver.grantor.may_promote(time.monotonic()), 10, 'A\'s lease to run out')
+        driver.promote(replicated, host='cloud')
+        driver.wait_active(10, host='cloud')
+        n = feed.count() + 5
+        wait_until(lambda: feed.count() >= n, 30, 'more measurements after the promotion')
+        feed.running = False
+        feed.thread.join(5)
+        with feed.lock:
+            merged = list(feed.merged)
+        res = wait_until(lambda: stored(f'{MODULE}_b', len(merged)), 15, f'B to store all {len(merged)}')
+        assert [msg_key(m) for m in res.measurements] == merged
+        assert len(merged) > published_at_loss + 8 > lost_from >= len(stored_a) >= 5
+        assert 'recovered' in proc_b.output() and 'Traceback' not in proc_b.output(), proc_b.output()[-3000:]
+    finally:
+        feed.close()
+        ros.master.stop_child(merger)
+        ros.master.call('deleteParam', '/merger')

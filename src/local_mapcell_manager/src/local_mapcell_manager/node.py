@@ -8,7 +8,7 @@ from __future__ import annotations
 import math
 import os
 import threading
-from typing import Any, Dict, Optional
+from typing import Any, Dict, List, Optional
 
 import rospy
 
@@ -16,11 +16,11 @@ import cnr_params
 from cnr_msgs.msg import CellState as CellStateMsg
 from cnr_msgs.msg import CellStates, MergedMeasurement
 from cnr_msgs.srv import (GetCell, GetCellResponse, GetCellStates, GetCellStatesResponse, GetMeasurements,
-                          GetMeasurementsResponse)
+                          GetMeasurementsResponse, GetRecentMeasurements)
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.measurements import Measurement
-from cnr_params.ros import init_node, private_section, quiet_at_shutdown
-from local_mapcell_manager.core.ledger import DUPLICATE, Ledger, Reading, Replay
+from cnr_params.ros import call_with_timeout, init_node, private_section, quiet_at_shutdown
+from local_mapcell_manager.core.ledger import DUPLICATE, Ledger, Reading, Replay, state_newest
 from local_mapcell_manager.core.params import ManagerParams, read_params
 from local_mapcell_manager.core.store import CellBook, MeasurementStore
 from migration_manager.instance import Hooks, ManagedInstance
@@ -53,6 +53,8 @@ class ManagerNode(Hooks):
         rospy.loginfo(f'{len(self.grid)} mapcells ({self.grid.cols} x {self.grid.rows} of {self.grid.cell_size:g} m); '
                       f'{self.ledger.count} stored measurements reloaded from {p.store}')
         self._dirty = True
+        self.recover_proxy = (rospy.ServiceProxy(p.recover_service, GetRecentMeasurements)
+                              if p.recover_service else None)
         self.services: list = []
         self._constructed = threading.Event()          # on_active (instance thread) waits for the publishers
         self.instance: Optional[ManagedInstance] = None
@@ -95,21 +97,58 @@ class ManagerNode(Hooks):
 
     def set_state(self, state: Dict[str, Any]) -> None:
         with self.lock:
+            since = self.ledger.missing_since(state_newest(state))
+        recovered = self._recover(since)
+        with self.lock:
+            added = self.ledger.recover(recovered)
             replay = self.ledger.restore(state)        # ValueError: refused, nothing changed
             self._dirty = True
             count = self.ledger.count
-        rospy.loginfo(f'state taken over: {count} measurements; {self._replayed(replay)}')
+        rospy.loginfo(f'state taken over: {count} measurements; {self._recovered(since, recovered, added)}'
+                      f'{self._replayed(replay)}')
+
+    def _recover(self, since: Optional[float]) -> List[Reading]:
+        """The merger's retained measurements from ``since`` on (README "Recovery"); none if the buffer reaches
+        back far enough (``since`` None), recovery is off, or the merger does not answer in time."""
+        if since is None or self.recover_proxy is None:
+            return []
+        ok, res = call_with_timeout(self.recover_proxy, self.p.recover_timeout, rospy.Time.from_sec(since))
+        if not ok and isinstance(res, rospy.ServiceException) and 'unavailable' in str(res):
+            rospy.loginfo(f'{self.recover_proxy.resolved_name} is not advertised (no merger yet): nothing to recover')
+            return []
+        if not ok:
+            rospy.logwarn(f'cannot recover the measurements published since {since:.3f} from '
+                          f'{self.recover_proxy.resolved_name} ({type(res).__name__}: {res}): any that no store '
+                          f'received are missing')
+            return []
+        if res.evicted and res.oldest_retained.to_sec() > since:
+            rospy.logwarn(f'the merger no longer retains measurements from {since:.3f} to '
+                          f'{res.oldest_retained.to_sec():.3f} (evicted: {res.evicted}): any of them that no store '
+                          f'received are missing')
+        return [r for r in map(self._reading, res.measurements) if r is not None]
+
+    @staticmethod
+    def _recovered(since: Optional[float], recovered: List[Reading], added: int) -> str:
+        if since is None:
+            return ''
+        return f'recovered {len(recovered)} retained measurement(s) since {since:.3f}, {added} not buffered; '
 
     def on_active(self) -> None:
         self._constructed.wait()
         if self.instance.managed and self.pub is None:     # active again after a freeze (rolled back)
             self.pub = self.instance.publisher('cell_states', CellStates, queue_size=1, latch=True)
+        with self.lock:                                 # a promotion without a state: the own content's newest
+            since = None if self.ledger.storing else self.ledger.missing_since(self.ledger.newest_time)
+        recovered = self._recover(since)
         with self.instance.lock, self.lock:
             own = self.ledger.count
+            added = 0 if self.ledger.storing else self.ledger.recover(recovered)
             replay = self.ledger.activated()
             self._dirty = True
-        if replay is not None and self.instance.managed:
-            rospy.loginfo(f'promoted without a state: {own} measurements of its own; {self._replayed(replay)}')
+        if replay is not None and (self.instance.managed or recovered):
+            rospy.loginfo(f'{"promoted without a state" if self.instance.managed else "started"}: {own} '
+                          f'measurements of its own; {self._recovered(since, recovered, added)}'
+                          f'{self._replayed(replay)}')
         if not self.services:
             self.services = [
                 rospy.Service('~get_cell', GetCell, self._get_cell),
@@ -145,11 +184,9 @@ class ManagerNode(Hooks):
     # -- the stream --------------------------------------------------------------------------------
     @quiet_at_shutdown
     def _on_measurement(self, msg: MergedMeasurement) -> None:
-        values = (msg.x, msg.y, msg.temperature, msg.header.stamp.to_sec())
-        if not all(math.isfinite(v) for v in values):
-            rospy.logwarn_throttle(5.0, f'ignored a merged measurement with non-finite values {values}')
+        r = self._reading(msg)
+        if r is None:
             return
-        r = Reading(msg.header.stamp.to_sec(), msg.x, msg.y, msg.temperature, msg.pose_stamp.to_sec(), msg.yaw)
         if self.instance is None:                      # still starting: the ledger only buffers
             with self.lock:
                 self.ledger.receive(r)
@@ -164,6 +201,14 @@ class ManagerNode(Hooks):
                 self._dirty = True
                 if self.instance.active:
                     self._flush()
+
+    @staticmethod
+    def _reading(msg: MergedMeasurement) -> Optional[Reading]:
+        values = (msg.x, msg.y, msg.temperature, msg.header.stamp.to_sec())
+        if not all(math.isfinite(v) for v in values):
+            rospy.logwarn_throttle(5.0, f'ignored a merged measurement with non-finite values {values}')
+            return None
+        return Reading(msg.header.stamp.to_sec(), msg.x, msg.y, msg.temperature, msg.pose_stamp.to_sec(), msg.yaw)
 
     def _flush(self) -> None:
         """Under both locks, while active: publish the stored measurements not published yet (a lapse, or the

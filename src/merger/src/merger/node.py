@@ -14,9 +14,11 @@ from std_msgs.msg import UInt32
 import cnr_params
 from cnr_maps.pose import quaternion_to_yaw
 from cnr_msgs.msg import MergedMeasurement
+from cnr_msgs.srv import GetRecentMeasurements, GetRecentMeasurementsResponse
 from cnr_params import Section
 from cnr_params.ros import init_node, private_section
 from merger.core.nearest import NearestMerger
+from merger.core.retention import Retention
 
 
 @dataclass
@@ -25,6 +27,8 @@ class MergerParams:
     max_wait: float
     pose_horizon: float
     pose_topic: str
+    retain_count: int
+    retain_seconds: float
 
 
 def read_params(p: Section) -> MergerParams:
@@ -32,7 +36,9 @@ def read_params(p: Section) -> MergerParams:
     return MergerParams(tolerance=p.number('tolerance', positive=True),
                         max_wait=p.number('max_wait', positive=True),
                         pose_horizon=p.number('pose_horizon', positive=True),
-                        pose_topic=p.string('pose_topic'))
+                        pose_topic=p.string('pose_topic'),
+                        retain_count=p.integer('retain_count', minimum=1),
+                        retain_seconds=p.number('retain_seconds', positive=True))
 
 
 class MergerNode:
@@ -43,6 +49,8 @@ class MergerNode:
         self.pub = rospy.Publisher('merged_measurements', MergedMeasurement, queue_size=50)
         self.dropped_pub = rospy.Publisher('~dropped', UInt32, queue_size=1, latch=True)
         self.frame = 'map'
+        self.retained: Retention[MergedMeasurement] = Retention(p.retain_count, p.retain_seconds)
+        self.recent_srv = rospy.Service('~recent', GetRecentMeasurements, self._on_recent)
         # message_filters subscribers: the same inputs a TimeSynchronizer would take, fed to the nearest-stamp core
         self.pose_sub = message_filters.Subscriber(p.pose_topic, Odometry, queue_size=100)
         self.temp_sub = message_filters.Subscriber('temperature', Temperature, queue_size=20)
@@ -85,11 +93,20 @@ class MergerNode:
             out.temperature = m.measurement
             out.stamp_difference = m.difference
             out.cell = -1                   # the merger does not know the grid: local_mapcell_manager assigns it
+            with self.lock:
+                self.retained.add(m.measurement_stamp, out)
             self.pub.publish(out)
         if dropped:
             self.dropped_pub.publish(UInt32(stats.dropped_no_pose))
             rospy.logwarn_throttle(10.0, f'dropped {stats.dropped_no_pose} measurement(s) with no pose within '
                                          f'{self.p.tolerance:g} s (merged {stats.merged})')
+
+    def _on_recent(self, req) -> GetRecentMeasurementsResponse:
+        with self.lock:
+            items = self.retained.since(req.since.to_sec())
+            oldest, evicted = self.retained.oldest, self.retained.evicted
+        return GetRecentMeasurementsResponse(measurements=[m for _, m in items],
+                                             oldest_retained=rospy.Time.from_sec(oldest), evicted=evicted)
 
 
 @cnr_params.exit_on_config_error

@@ -93,7 +93,10 @@ class MfgNode(Hooks):
         rospy.loginfo(f'mfg: state taken over: {summary}')
 
     def on_active(self) -> None:
-        """Nothing to open: :meth:`run` waits for ``instance.active`` and resumes from :attr:`memory`."""
+        """:meth:`run` waits for ``instance.active`` and resumes from :attr:`memory`; the activity report goes out
+        at once (a consumer sees the new instance without waiting for the next ``activity_rate`` tick)."""
+        if getattr(self, 'activity_pub', None) is not None:
+            self._publish_activity(None)
 
     def on_frozen(self) -> None:
         with self.lock:

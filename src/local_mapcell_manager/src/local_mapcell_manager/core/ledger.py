@@ -151,6 +151,11 @@ class Ledger:
         return self.c.book.count
 
     @property
+    def newest_time(self) -> Optional[float]:
+        """The newest stamp stored (or seen outside the grid); None: nothing yet."""
+        return self.c.dedup.newest_time
+
+    @property
     def duplicates(self) -> int:
         return self.c.duplicates
 
@@ -197,6 +202,37 @@ class Ledger:
     def published(self, numbers: Iterable[int]) -> None:
         for n in numbers:
             self.c.unpublished.pop(n, None)
+
+    # ------------------------------------------------------------------ recovery
+    def missing_since(self, newest: Optional[float]) -> Optional[float]:
+        """At a promotion onto ``newest`` (the newest stamp of the state taken over, or of the own content; None:
+        nothing stored): the stamp from which received readings may be missing, or None if the buffer reaches
+        back to it (it holds a reading at or before ``newest``: nothing published since can have been missed,
+        one publisher's stream arrives in order).
+
+        A gap happens when no instance was receiving: the active one cut off on the other host (a failover
+        with the last replicated state) or this one subscribed late (a fresh instance). The merger retains what
+        it published (``Ledger.recover``)."""
+        if self.buffer and newest is not None and self.buffer[0].time <= newest:
+            return None
+        return newest if newest is not None else 0.0
+
+    def recover(self, readings: Sequence[Reading]) -> int:
+        """Readings the publisher retained from before the buffer's start on, in publication order (they reach
+        back to ``missing_since``), put ahead of the buffer; buffered readings they hold already (equal in
+        stamp and values) are dropped from the buffer, so the promotion that follows replays the stream in its
+        order through the duplicate rule. Returns how many readings were not buffered."""
+        recovered = {measurement_key(r.time, r.x, r.y, r.temperature) for r in readings}
+        rest = [r for r in self.buffer if measurement_key(r.time, r.x, r.y, r.temperature) not in recovered]
+        added = len(readings) - (len(self.buffer) - len(rest))
+        merged = list(readings) + rest
+        maxlen = self.buffer.maxlen
+        if len(merged) > maxlen:
+            self.warn(f'standby buffer full ({maxlen} readings): the {len(merged) - maxlen} oldest recovered '
+                      f'readings dropped')
+            self.buffer_dropped += len(merged) - maxlen
+        self.buffer = deque(merged[-maxlen:], maxlen=maxlen)
+        return added
 
     # ------------------------------------------------------------------ migration
     def _replay(self, content: _Content) -> Tuple[Replay, List[Measurement]]:
@@ -289,6 +325,16 @@ class Handover:
     unpublished: List[Tuple[Measurement, float]]      # (measurement, yaw), in order
     duplicates: int
     outside: int
+
+
+def state_newest(state: Any) -> Optional[float]:
+    """The newest stamp a handed-over state holds (its ``newest.time``), or None if it has none or the state is
+    malformed (:func:`parse_state` then refuses it, naming the field)."""
+    try:
+        t = state['newest']['time']
+    except (TypeError, KeyError):
+        return None
+    return float(t) if isinstance(t, (int, float)) and not isinstance(t, bool) and math.isfinite(t) else None
 
 
 def _fail(field: str, problem: str) -> ValueError:

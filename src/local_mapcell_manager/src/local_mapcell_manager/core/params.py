@@ -22,6 +22,8 @@ class ManagerParams:
     publish_period: float
     frame_id: str
     standby_buffer: int          # readings a migration standby keeps (README "Migration state")
+    recover_service: str         # the merger's GetRecentMeasurements ('' = no recovery; README "Recovery")
+    recover_timeout: float       # s
 
 
 def read_grid(p: Section, occupancy: OccupancyMap) -> MapcellGrid:
@@ -36,4 +38,6 @@ def read_params(p: Section) -> ManagerParams:
     return ManagerParams(grid=read_grid(p, load_map(map_file)), store=os.path.expanduser(p.string('store')),
                          reset_store=p.boolean('reset_store'), map_file=map_file,
                          publish_period=1.0 / p.number('max_publish_rate', positive=True),
-                         frame_id=p.string('frame_id'), standby_buffer=p.integer('standby_buffer', minimum=1))
+                         frame_id=p.string('frame_id'), standby_buffer=p.integer('standby_buffer', minimum=1),
+                         recover_service=p.string('recover_service'),
+                         recover_timeout=p.number('recover_timeout', positive=True))
