@@ -2,12 +2,18 @@
 # run_mission.sh — README command (1): the data-center monitoring mission (thesis §4.1, paper Appendix VI).
 #
 #   launch_scripts/run_mission.sh [--scenario corridor|datacenter|FILE.yaml] [--port P] [--rtf FACTOR]
-#                                 [--report-dir DIR]
+#                                 [--report-dir DIR] [--single-master]
 #   launch_scripts/run_mission.sh --two-host [--placement NAME|FILE] [--scenario ...] [--port P] [--report-dir DIR]
 #                                 [--delay MS] [--rate MBIT] [--loss PCT] [--trace FILE] [--link-map FILE]
 #                                 [--migration [--rule] | --network-aware [TASK]]
 #
-# Sets up the workspace, starts a master (default port 11311, or --port, or ROS_MASTER_URI), brings up the
+# With no host option (none of --two-host, --migration, --rule, --network-aware, --placement, --single-master)
+# it runs the network-aware mission (below: --network-aware patrol) when it can: as root, with /dev/net/tun,
+# in the corridor (the scenario of the link map config/link_map_corridor.yaml) and in real time (no --rtf
+# other than 1). Otherwise, and with --single-master, it runs the single-master mission and says why in one
+# line.
+#
+# Single master: sets up the workspace, starts a master (default port 11311, or --port, or ROS_MASTER_URI), brings up the
 # simulated TurtleBot with the monitoring modules (kestrel_driver, merger, local_mapcell_manager,
 # global_goal_manager, mfg) and prints progress until the hotspot is found (plus the scenario's extra
 # time). Writes a report folder (default reports/<scenario>-<date>): mapcells.png, measurements.tsv,
@@ -31,17 +37,18 @@
 # link.tsv (conditions and bytes over time), the bytes over the link and, network-aware, decisions.tsv.
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
-port=""; scenario="corridor"; rtf="5"; report=""; two_host=""; placement="move_base_cloud"; link_args=(); rtf_given=""; migration=(); network_aware=""; placement_given=""
+port=""; scenario="corridor"; rtf="5"; report=""; two_host=""; placement="move_base_cloud"; link_args=(); rtf_given=""; migration=(); network_aware=""; placement_given=""; hosts_given=""
 while [ $# -gt 0 ]; do
   case "$1" in
-    --two-host) two_host=1; shift ;;
-    --migration) migration+=(--migration); two_host=1; shift ;;
-    --rule) migration+=(--rule); two_host=1; shift ;;
+    --single-master) hosts_given=1; shift ;;
+    --two-host) two_host=1; hosts_given=1; shift ;;
+    --migration) migration+=(--migration); two_host=1; hosts_given=1; shift ;;
+    --rule) migration+=(--rule); two_host=1; hosts_given=1; shift ;;
     --network-aware)
       task=patrol
       if [ $# -gt 1 ] && [ "${2#-}" = "$2" ]; then task="$2"; shift; fi
-      migration+=(--network-aware "$task"); two_host=1; network_aware=1; shift ;;
-    --placement) placement="${2:?}"; placement_given=1; two_host=1; shift 2 ;;
+      migration+=(--network-aware "$task"); two_host=1; network_aware=1; hosts_given=1; shift ;;
+    --placement) placement="${2:?}"; placement_given=1; two_host=1; hosts_given=1; shift 2 ;;
     --delay|--rate|--loss) link_args+=("$1" "${2:?}"); shift 2 ;;
     --trace|--link-map) link_args+=("$1" "$(realpath -m "${2:?}")"); shift 2 ;;
     --scenario) scenario="${2:?}"; shift 2 ;;
@@ -52,6 +59,20 @@ while [ $# -gt 0 ]; do
     *) cnr_die "unknown argument '$1' (see --help)" ;;
   esac
 done
+if [ -z "$hosts_given" ]; then
+  why=""
+  if [ "$(id -u)" != 0 ]; then why="not root (robot and cloud need network namespaces, TUN devices and a CPU cgroup)"
+  elif [ ! -c /dev/net/tun ]; then why="no /dev/net/tun (the testbed's link emulator needs it)"
+  elif [ "$scenario" != corridor ]; then why="--scenario $scenario: the network-aware mission's link map (config/link_map_corridor.yaml) is the corridor's"
+  elif [ -n "$rtf_given" ] && [ "$rtf" != 1 ]; then why="--rtf $rtf: two hosts run in real time"
+  fi
+  if [ -z "$why" ]; then
+    migration+=(--network-aware patrol); two_host=1; network_aware=1
+    cnr_log "network-aware mission (robot and cloud on the testbed; --single-master for one host)"
+  else
+    cnr_log "single-master mission: $why"
+  fi
+fi
 case "$scenario" in
   *.yaml) scenario_file="$(realpath -m "$scenario")" ;;
   *) scenario_file="$CNR_WS/config/scenarios/$scenario.yaml" ;;
