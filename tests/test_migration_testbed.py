@@ -190,6 +190,33 @@ def test_hot_migration_to_a_warm_standby(bed):
     assert gap < 2.0
 
 
+def test_a_start_right_after_a_stop_starts_a_new_standby(bed):
+    """The agent on the robot (the module is active on the cloud): a standby started, then stopped and at once
+    started again (what a hot migration does on its old host) is a new process that becomes a standby, not the
+    old one still being stopped."""
+    import re
+
+    def command(verb):
+        res = bed.rosrun('robot', 'rosservice', 'call', '/migration/agents/robot/command', verb, MODULE)
+        assert res.returncode == 0 and 'ok: True' in res.stdout, res.stdout + res.stderr
+        return int(re.search(r'pid: (\d+)', res.stdout).group(1))
+    first = command('start')
+    wait_until(lambda: (bed.status('robot') or {}).get('role') == 'standby', 120, 'a standby on the robot')
+    # stop, then start at once, from one client (as the manager does): no rosservice start-up in between
+    script = ('import rospy, sys\n'
+              'from cnr_msgs.srv import AgentCommand\n'
+              'call = rospy.ServiceProxy("/migration/agents/robot/command", AgentCommand)\n'
+              f'stop, start = call("stop", "{MODULE}"), call("start", "{MODULE}")\n'
+              'print(stop.ok, stop.pid, start.ok, start.pid)\n')
+    res = bed.rosrun('robot', '/usr/bin/python3', '-c', script)
+    assert res.returncode == 0, res.stdout + res.stderr
+    stop_ok, stopped, start_ok, second = res.stdout.split()
+    assert stop_ok == start_ok == 'True' and int(stopped) == first
+    assert int(second) != first, 'the start was taken by the instance being stopped'
+    wait_until(lambda: (bed.status('robot') or {}).get('role') == 'standby', 120, 'the new standby on the robot')
+    command('stop')
+
+
 def test_exactly_one_active_under_a_partition(bed):
     if bed.placement()[MODULE][0] != 'cloud':
         assert bed.migrate('cloud', 'cold').returncode == 0

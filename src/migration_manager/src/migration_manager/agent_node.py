@@ -35,6 +35,7 @@ class Slot:
     exited_at: Optional[float] = None
     last_code: Optional[int] = None
     last_pid: int = 0
+    stopping: Optional[Proc] = None       # an instance being stopped (SIGINT sent, not gone yet)
 
 
 class Agent:
@@ -71,14 +72,6 @@ class Agent:
         slot.exited_at = None
         rospy.loginfo(f'{slot.module}: started a standby (pid {slot.proc.pid}, log {log})')
 
-    def _stop(self, slot: Slot) -> Optional[int]:
-        proc, slot.proc = slot.proc, None
-        if proc is None:
-            return None
-        code = stop_process(proc.popen, timeout=self.cfg.stop_timeout)
-        rospy.loginfo(f'{slot.module}: stopped (exit status {code})')
-        return code
-
     def _on_command(self, req) -> AgentCommandResponse:
         slot = self.slots.get(req.module)
         if slot is None:
@@ -87,7 +80,9 @@ class Agent:
         if req.command == 'start':
             with self.lock:
                 slot.wanted = True
-                if slot.proc is None or not slot.proc.alive():
+                # an instance still being stopped does not count: a start right after a stop (a hot migration's
+                # fresh standby on the old host) starts a new one; the old one goes on stopping
+                if slot.proc is None or not slot.proc.alive() or slot.proc is slot.stopping:
                     self._start(slot)
                 pid = slot.proc.pid
             self._health()
@@ -96,6 +91,7 @@ class Agent:
             with self.lock:
                 slot.wanted = False
                 proc = slot.proc
+                slot.stopping = proc
             threading.Thread(target=self._stop_quietly, args=(slot, proc), daemon=True).start()
             return AgentCommandResponse(ok=True, message='stopping', pid=proc.pid if proc else 0)
         return AgentCommandResponse(ok=False, message=f'unknown command {req.command!r} (start, stop)')
@@ -107,6 +103,8 @@ class Agent:
         with self.lock:
             if slot.proc is proc:
                 slot.proc = None
+            if slot.stopping is proc:
+                slot.stopping = None
         rospy.loginfo(f'{slot.module}: stopped')
         self._health()
 
