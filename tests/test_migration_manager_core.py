@@ -42,6 +42,18 @@ def test_the_holder_lease_always_ends_before_the_grantor_may_promote_another():
         g.promote('mfg@robot', 1.5)
 
 
+def test_a_standby_knows_whether_the_module_was_ever_promoted_once_it_heard_the_grantor():
+    g, standby = Grantor('local_mapcell_manager', D, MARGIN), Holder('local_mapcell_manager', 'local_mapcell_manager@cloud')
+    assert not standby.heard                          # nothing known yet: the lmm standby is not ready
+    standby.on_answer(Answer('mfg', 3, 'mfg@robot', 0, False, D))
+    assert not standby.heard                          # another module's announcement says nothing
+    standby.on_answer(g.announcement())
+    assert standby.heard and standby.seen == 0        # the mission's first start: never promoted
+    g.promote('local_mapcell_manager@robot', 0.0)
+    standby.on_answer(g.announcement())
+    assert standby.seen == 1                          # a store was active: its input publisher runs
+
+
 def test_a_late_answer_cannot_extend_a_lease():
     g, h = Grantor('mfg', D, MARGIN), Holder('mfg', 'mfg@cloud')
     h.promoted(g.promote('mfg@cloud', 0.0))

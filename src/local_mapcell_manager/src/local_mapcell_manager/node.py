@@ -80,15 +80,17 @@ class ManagerNode(Hooks):
     def standby_ready(self) -> bool:
         """Connected to the merged measurements' publishers, or none is registered yet and no instance of the
         module was ever promoted (the mission's first instance: the two-host mission starts the merger only once a
-        store is active, so waiting for it here would wait forever). Once a term has been announced a merger
-        runs: a standby whose master does not list it (e.g. on the cloud just after an outage, before the bridge
-        has restored the registration) is not ready, or what the merger publishes until it connects would
-        reach no store."""
-        if self.sub is None:
+        store is active, so waiting for it here would wait forever). Which of the two it is, the manager's
+        announcements say (term 0: never promoted): not ready before one has arrived. Once a term has been
+        announced a merger runs: a standby whose master does not list it (e.g. on the cloud just after an
+        outage, before the bridge has restored the registration) is not ready, or what the merger publishes
+        until it connects would reach no store."""
+        if self.sub is None or self.instance is None:
             return False
         if self.sub.get_num_connections() > 0:
             return True
-        if self.instance is not None and self.instance.holder.seen > 0:
+        holder = self.instance.holder
+        if not holder.heard or holder.seen > 0:
             return False
         try:
             return all(name != self.sub.resolved_name for name, _type in rospy.get_published_topics())

@@ -117,6 +117,7 @@ class Holder:
     superseded: bool = False    # a newer term or another holder was announced: this instance is done
     seen: int = 0               # the highest term announced so far (a promotion must not be older)
     seen_holder: str = ''       # the holder announced with it
+    heard: bool = False         # an announcement or answer of the module's grantor has arrived (``seen`` is known)
 
     def promoted(self, term: int) -> None:
         """Promotion to ``term``: output waits for the first granted renewal."""
@@ -140,6 +141,7 @@ class Holder:
     def on_answer(self, a: Answer) -> None:
         if a.module != self.module:
             return
+        self.heard = True
         if a.term > self.seen:       # the announcement of this very promotion may arrive before the order
             self.seen, self.seen_holder = a.term, a.holder
         if self.term == 0:
