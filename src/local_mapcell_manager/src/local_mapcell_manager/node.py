@@ -149,7 +149,7 @@ class ManagerNode(Hooks):
         recovered = self._recover(since)
         with self.instance.lock, self.lock:
             own = self.ledger.count
-            added = 0 if self.ledger.storing else self.ledger.recover(recovered)
+            added = self.ledger.recover(recovered)      # nothing when already storing (no gap asked for)
             replay = self.ledger.activated()
             self._dirty = True
         if replay is not None and (self.instance.managed or recovered):

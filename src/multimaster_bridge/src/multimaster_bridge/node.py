@@ -133,9 +133,8 @@ class Bridge:
         self.stopped = False
         # rospy runs on_shutdown hooks in its SIGINT handler, i.e. in the main thread, possibly in the
         # middle of reconcile(): the hook only sets ``closing`` (taking a lock there could deadlock), and
-        # spin() removes the registrations once its loop has ended. Registrations change only under this
-        # lock, and not at all once ``closing`` is set.
-        self.registry_lock = threading.Lock()
+        # spin() removes the registrations once its loop has ended. Registrations change only in the main
+        # thread (reconcile() in the loop, then shutdown()), so they need no lock of their own.
         self.closing = False
         self.quality_pub = rospy.Publisher('link_quality', LinkQuality, queue_size=10)
 
@@ -275,9 +274,8 @@ class Bridge:
                               f'registrations')
 
     def reconcile(self) -> None:
-        with self.registry_lock:
-            if not self.closing:
-                self._reconcile()
+        if not self.closing:
+            self._reconcile()
 
     def _reconcile(self) -> None:
         snap = self.snapshot
@@ -406,17 +404,16 @@ class Bridge:
 
     def shutdown(self) -> None:
         """Say goodbye and remove every registration this bridge made (called by spin() as it ends)."""
-        with self.registry_lock:
-            self.closing = True
-            with self.lock:
-                for peer in self.peers.values():
-                    self._send(peer, 'bye')
+        self.closing = True
+        with self.lock:
             for peer in self.peers.values():
-                try:
-                    self.master.apply(sorted(peer.registered), [])
-                except (OSError, xmlrpc.client.Error):
-                    pass
-                peer.registered = set()
+                self._send(peer, 'bye')
+        for peer in self.peers.values():
+            try:
+                self.master.apply(sorted(peer.registered), [])
+            except (OSError, xmlrpc.client.Error):
+                pass
+            peer.registered = set()
         self.stopped = True
         self.sock.close()
 

@@ -222,6 +222,8 @@ class Ledger:
         back to ``missing_since``), put ahead of the buffer; buffered readings they hold already (equal in
         stamp and values) are dropped from the buffer, so the promotion that follows replays the stream in its
         order through the duplicate rule. Returns how many readings were not buffered."""
+        if not readings:
+            return 0
         recovered = {measurement_key(r.time, r.x, r.y, r.temperature) for r in readings}
         rest = [r for r in self.buffer if measurement_key(r.time, r.x, r.y, r.temperature) not in recovered]
         added = len(readings) - (len(self.buffer) - len(rest))
