@@ -60,7 +60,7 @@ def test_model_totals_of_charged_work():
     b.add_work(-1.0, -5, 1.0)                  # never negative
     assert b.cpu_seconds == pytest.approx(0.75) and b.radio_bytes == 1024
     c = b.config
-    assert b.energy.cpu == pytest.approx(0.75 * c.cpu_joules_per_cpu_second)
+    assert b.energy.cpu == pytest.approx(0.75 * c.cpu_full_load_power / c.cpu_capacity)
     assert b.energy.radio == pytest.approx(1024 * c.radio_joules_per_byte)
 
 

@@ -218,10 +218,22 @@ def test_battery_reacts_to_motion_cpu_and_radio():
     working.add_work(cpu_seconds=2.0, bytes_transferred=10e6, interval=10.0)
     assert idle.energy.total == pytest.approx((cfg.base_idle_power + cfg.laptop_idle_power) * 10.0)
     assert moving.energy.motors > 0 and moving.percentage < idle.percentage
-    assert working.energy.cpu == pytest.approx(2.0 * cfg.cpu_joules_per_cpu_second)
+    assert working.energy.cpu == pytest.approx(2.0 * cfg.cpu_full_load_power / cfg.cpu_capacity)
     assert working.energy.radio == pytest.approx(10e6 * cfg.radio_joules_per_byte)
     assert working.percentage < idle.percentage
     assert 13.2 <= idle.voltage <= 16.5
+
+
+def test_a_capped_robot_pays_the_full_load_power_for_its_limit():
+    """Under the testbed's cap (0.33 CPU) a robot busy all the time uses 0.33 CPU-s per second and must draw the
+    netbook's full-load power, not a third of it."""
+    sec = SIM.section('battery')
+    cfg = BatteryConfig.from_section(Section(dict(sec.data, cpu_capacity=1 / 3), sec.source))
+    b = BatteryModel(cfg)
+    b.add_work(cpu_seconds=10.0 / 3, bytes_transferred=0, interval=10.0)
+    assert b.energy.cpu == pytest.approx(10.0 * cfg.cpu_full_load_power)
+    with pytest.raises(ConfigError, match='cpu_capacity'):
+        BatteryConfig.from_section(Section(dict(sec.data, cpu_capacity=0.0), sec.source))
 
 
 def test_battery_config_from_repository_file(workspace):

@@ -161,6 +161,12 @@ class TwoHostMission:
         when no cgroup is available and runs the command uncapped)."""
         return cpucap.run_argv([], self.testbed.robot_cgroup, self.testbed.config_path)
 
+    def _robot_cpu_capacity(self) -> str:
+        """The robot cgroup's CPU limit: the battery's ``cpu_capacity`` (a capped robot busy all the time is the
+        netbook at full load); '' when the robot runs uncapped (config/battery.yaml's value)."""
+        cpus = self.robot_cpu_report().get('limit_cpus')
+        return f'{cpus:.6g}' if cpus else ''
+
     def robot_cpu_report(self) -> Dict:
         """CPU used by the robot's computer (its cgroup) and how often the cap throttled it."""
         try:
@@ -214,6 +220,7 @@ class TwoHostMission:
                                            f'placement:={self.placement.name}',
                                            f'battery_cpu_cgroup:={self.testbed.robot_cgroup}',
                                            f'battery_interface:={self.testbed.cfg.robot_dev}',
+                                           f'battery_cpu_capacity:={self._robot_cpu_capacity()}',
                                            'relay_status_topic:=' + ('/store_forward_sender/status'
                                                                      if self.placement.relayed() else ''),
                                            f'relay_drain_timeout:={self.relay_drain_timeout}',

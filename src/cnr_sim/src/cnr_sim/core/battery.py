@@ -4,8 +4,11 @@ ROS-free. Power drawn from the 14.8 V Li-ion pack [W]:
 
     P = P_base_idle + P_laptop_idle                                 (constant, from config)
       + (m g c_rr |v| + m |a v| + I |alpha w| + c_turn |w|) / eta     (motors, from the simulated motion)
-    E_cpu   = k_cpu  * (CPU seconds actually used by the robot's computer: the processes of its cgroup, read
-                        from the cgroup's accounting, or else the robot's processes, measured with psutil)
+    E_cpu   = P_cpu / capacity * (CPU seconds actually used by the robot's computer: the processes of its cgroup,
+                        read from the cgroup's accounting, or else the robot's processes, measured with psutil)
+              P_cpu: the robot CPU's power above idle at full load [W]; capacity: the CPUs of this machine
+              that are the robot's computer at full load (its cgroup's limit under the testbed's cap, 1/slowdown:
+              a capped robot busy all the time uses ``capacity`` CPU-seconds per second and draws P_cpu)
     E_radio = e_byte * (bytes actually sent + received on the robot's interface, measured with psutil in the
                         caller's network namespace)
 
@@ -41,7 +44,8 @@ class BatteryConfig:
     yaw_inertia: float
     turn_resistance_power: float
     motor_efficiency: float
-    cpu_joules_per_cpu_second: float
+    cpu_full_load_power: float
+    cpu_capacity: float
     radio_joules_per_byte: float
 
     @classmethod
@@ -54,7 +58,7 @@ class BatteryConfig:
             else:
                 kw[name] = s.number(name, nonnegative=True)
         cfg = cls(**kw)
-        for key in ('capacity_ah', 'nominal_voltage', 'motor_efficiency'):
+        for key in ('capacity_ah', 'nominal_voltage', 'motor_efficiency', 'cpu_capacity'):
             if not getattr(cfg, key) > 0:
                 raise s.error(key, 'must be > 0')
         if not cfg.full_voltage > cfg.empty_voltage:
@@ -93,6 +97,11 @@ class BatteryModel:
         self._cpu_rate = 0.0
         self._radio_rate = 0.0
 
+    @property
+    def cpu_joules_per_cpu_second(self) -> float:
+        """Energy per CPU-second of this machine charged [J]: full-load power over the capacity."""
+        return self.config.cpu_full_load_power / self.config.cpu_capacity
+
     def motor_power(self, v: float, w: float, accel: float, alpha: float) -> float:
         """Electrical motor power [W] for speed v [m/s], yaw rate w [rad/s] and their derivatives."""
         c = self.config
@@ -112,7 +121,7 @@ class BatteryModel:
     def add_work(self, cpu_seconds: float, bytes_transferred: float, interval: float) -> None:
         """Account measured CPU time [s] and radio traffic [bytes] that happened over ``interval`` [s]."""
         c = self.config
-        e_cpu = c.cpu_joules_per_cpu_second * max(cpu_seconds, 0.0)
+        e_cpu = self.cpu_joules_per_cpu_second * max(cpu_seconds, 0.0)
         e_radio = c.radio_joules_per_byte * max(bytes_transferred, 0.0)
         self.energy.cpu += e_cpu
         self.energy.radio += e_radio
