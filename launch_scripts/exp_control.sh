@@ -4,10 +4,13 @@
 # module on the robot and no decision; CT (task time) and CB (battery fraction) as mean and sd of the completed
 # runs are written to config/control_values.yaml (Eq. 4-5's control values) and printed beside the thesis's
 # CT 87.9286 s (sd 14.3815), CB 0.004586 (sd 0.000702). Needs root; uses the default testbed (robot/cloud
-# namespaces). Rows go to bench_results/control/results.tsv as measured; run it again to resume.
+# namespaces). Rows go to bench_results/control/<task>@<location>/results.tsv as measured; run it again to
+# resume. --task patrol (or hotspot_search: a monitoring mission of config/decision.yaml, the main job's
+# decision) runs whole two-host missions instead, as the main job measures them (T to the hotspot, B until
+# then), with the link of --link-map (default config/link_map_<location>.yaml); about 4 minutes each.
 #
 #   launch_scripts/exp_control.sh [--runs 20] [--task T] [--location L] [--out DIR] [--control-values FILE]
-#                                 [--settle 6] [--port 11411]
+#                                 [--settle 6] [--port 11411] [--link-map FILE]
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 case "${1:-}" in -h|--help) cnr_help; exit 0 ;; esac

@@ -63,6 +63,10 @@ def test_mission_finds_hotspot_and_survives_a_restart(mission, ros):
     assert summary['hotspot']['cell'] == HEATER_CELL
     assert summary['sim_time_to_find'] < 400.0
     assert summary['distance_driven'] > 8.0 and summary['battery_used_percent'] > 0
+    # the mission as a task (the network-aware decision's T_task, B_task): to the hotspot, not to the end
+    task = summary['task']
+    assert task['mission_status'] == 'completed' and task['t_task'] == pytest.approx(summary['sim_time_to_find'])
+    assert 0 < task['b_task'] < summary['battery_used_percent'] / 100.0, (task, summary['battery_used_percent'])
     rows = open(os.path.join(report, 'measurements.tsv')).read().splitlines()
     assert rows[0].split('\t')[:5] == ['measurement', 'time', 'x', 'y', 'temperature']
     assert len(rows) - 1 == summary['measurements_taken'] >= before

@@ -238,3 +238,20 @@ def test_an_exported_and_imported_set_decides_like_the_one_it_came_from(tmp_path
     assert 'corridor_round_trip@corridor\t40 rows' in capsys.readouterr().out
     assert training(['--config', config, '--dir', b, 'show', 'nope', 'corridor']) == 2      # one line, status 2
     assert 'unknown task' in capsys.readouterr().err
+
+
+def test_control_of_an_unknown_task_names_both_places_and_exits_2(tmp_path, capsys):
+    """exp_control.sh: a task is a goal task of the location's scenario or a monitoring mission of
+    config/decision.yaml; anything else is one line naming both, exit 2, nothing run."""
+    from cnr_benchmarks import campaign as script
+    args = script.parse_args(['control', '--task', 'no_such_task', '--out', str(tmp_path / 'out')])
+    assert script.control(args) == 2
+    err = capsys.readouterr().err
+    assert "'no_such_task'" in err and 'corridor.yaml' in err and 'decision.yaml' in err
+    assert not (tmp_path / 'out').exists()
+
+
+def test_control_results_go_per_task_and_location():
+    from cnr_benchmarks import campaign as script
+    assert script.parse_args(['control', '--task', 'patrol']).out.endswith('bench_results/control/patrol@corridor')
+    assert script.parse_args(['campaign']).out.endswith('bench_results/campaign')

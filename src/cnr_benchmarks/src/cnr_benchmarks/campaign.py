@@ -10,7 +10,12 @@ migration_manager and placed by network_monitor's migration_decider. Rows are ap
 same command again resumes after the last finished run.
 
 ``control``: every module on the robot, no decision; CT/CB (mean, sd of the completed runs) are written to
-config/control_values.yaml (or ``--control-values``) and printed beside the thesis's Table 4-5.
+config/control_values.yaml (or ``--control-values``) and printed beside the thesis's Table 4-5. A task that is
+not one of the location's ``tasks`` but a monitoring mission of config/decision.yaml (``patrol``,
+``hotspot_search``: the main job's decision) is measured as the main job measures it: ``--runs`` whole two-host
+missions (placement all_robot, the modules run by migration agents as in the main job, no decider, the link of
+``--link-map``, default config/link_map_<location>.yaml when there is one), T_task the sim time to the hotspot
+and B_task the battery used until then (the mission report's ``task``); each run in ``<out>/runs/NN``.
 
 ``campaign``: ``--conditions`` link conditions drawn with ``--seed`` (cnr_benchmarks.core.campaign), each run
 as the robot decides and then with the other placement; the robot's training set starts empty in
@@ -21,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import datetime
+import json
 import os
 import statistics
 import subprocess
@@ -63,17 +69,28 @@ def run_session(args: argparse.Namespace, plan: Dict, results: str, training_dir
 
 # ---------------------------------------------------------------- control (Table 4-5)
 def control(args: argparse.Namespace) -> int:
-    from cnr_mission.core.task import COMPLETED, read_results
-    from network_monitor.core.evaluation import ControlValues, write_control_values
+    from cnr_mission.core.task import read_results
+    scenario = os.path.join(report.WS, 'config', 'scenarios', f'{args.location}.yaml')
+    with open(scenario) as f:
+        goal_tasks = (yaml.safe_load(f) or {}).get('tasks') or {}
+    if args.task not in goal_tasks:
+        return control_missions(args, scenario)
     results = os.path.join(args.out, 'results.tsv')
     plan = core.control_plan(args.task, args.location, args.settle, args.runs)
     rc = run_session(args, plan, results, os.path.join(args.out, 'training'), args.control_values)
     rows, _ = read_results(results)
+    return write_control(args, rows) or rc
+
+
+def write_control(args: argparse.Namespace, rows: List[Dict]) -> int:
+    """CT/CB of the completed rows (mission_status, t_task, b_task) into the control values and control.md."""
+    from cnr_mission.core.task import COMPLETED
+    from network_monitor.core.evaluation import ControlValues, write_control_values
     done = [r for r in rows if r['mission_status'] == COMPLETED]
     report.progress(f'[control] {len(rows)} runs, {len(done)} completed')
     if len(done) < 2:
         print('exp_control: fewer than 2 completed runs: no control values written', file=sys.stderr)
-        return rc or 1
+        return 1
     t = [float(r['t_task']) for r in done]
     b = [float(r['b_task']) for r in done]
     values = ControlValues(task=args.task, ct_mean=statistics.mean(t), ct_std=statistics.stdev(t),
@@ -91,7 +108,59 @@ def control(args: argparse.Namespace) -> int:
             f'robot, {len(rows)} runs, {len(done)} completed. Written to `{args.control_values}`.\n\n{table}\n')
     report.write_text(os.path.join(args.out, 'control.md'), text)
     print(text, flush=True)
-    return rc
+    return 0
+
+
+def control_missions(args: argparse.Namespace, scenario: str) -> int:
+    """The control runs of a monitoring-mission task (module docstring): one two-host mission per run."""
+    with open(os.path.join(report.WS, 'config', 'decision.yaml')) as f:
+        mission_tasks = (yaml.safe_load(f) or {}).get('tasks') or {}
+    if args.task not in mission_tasks:
+        print(f'exp_control: {args.task!r} is neither a task of {scenario} (tasks) nor of config/decision.yaml '
+              f'(tasks)', file=sys.stderr)
+        return 2
+    line = subprocess.run(['rosrun', 'cnr_mission', 'check_scenario', scenario], capture_output=True, text=True)
+    if line.returncode != 0:
+        print(line.stderr.strip(), file=sys.stderr)
+        return 2
+    _name, map_file, x, y, a = line.stdout.split()
+    link_map = args.link_map
+    if link_map is None:
+        default = os.path.join(report.WS, 'config', f'link_map_{args.location}.yaml')
+        link_map = default if os.path.exists(default) else ''
+    runs_dir = os.path.join(args.out, 'runs')
+    rows: List[Dict] = []
+    for i in range(1, args.runs + 1):
+        run = os.path.join(runs_dir, f'{i:02d}')
+        summary = os.path.join(run, 'summary.json')
+        if not os.path.exists(summary):
+            if os.path.exists(run):             # an interrupted run: kept aside, never reloaded
+                os.replace(run, f'{run}.prev{int(time.time())}')
+            report.progress(f'[control] run {i}/{args.runs}: {args.task}@{args.location} mission, every module on '
+                            f'the robot' + (f', link map {os.path.relpath(link_map, report.WS)}' if link_map else ''))
+            argv = ['rosrun', 'cnr_mission', 'two_host_mission', '--config-dir', os.path.join(report.WS, 'config'),
+                    '--scenario', scenario, '--map', map_file, '--start', x, y, a, '--placement', 'all_robot',
+                    '--migration', '--report-dir', run, '--port', str(args.port)]
+            rc = subprocess.call(argv + (['--link-map', link_map] if link_map else []))
+            if rc not in (0, 3) or not os.path.exists(summary):
+                print(f'exp_control: run {i} ended with status {rc} and no report ({run}); run the same command '
+                      f'again to resume', file=sys.stderr)
+                return rc or 1
+        with open(summary) as f:
+            task = json.load(f)['task']
+        if task['b_task'] is None:
+            print(f'exp_control: run {i} has no battery reading ({summary}): left out', file=sys.stderr)
+            continue
+        rows.append(dict(id=f'control-{i:02d}', mission_status=task['mission_status'], t_task=task['t_task'],
+                         b_task=task['b_task']))
+        report.progress(f'[control] run {i}: {task["mission_status"]}, T {task["t_task"]:.1f} s, '
+                        f'B {task["b_task"]:.5f}')
+    os.makedirs(args.out, exist_ok=True)
+    with open(os.path.join(args.out, 'results.tsv'), 'w') as f:     # a table of the runs' reports (rewritten)
+        f.write('id\tmission_status\tt_task\tb_task\n')
+        for r in rows:
+            f.write(f'{r["id"]}\t{r["mission_status"]}\t{r["t_task"]}\t{r["b_task"]}\n')
+    return write_control(args, rows)
 
 
 # ---------------------------------------------------------------- campaign
@@ -119,14 +188,16 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
         p = sub.add_parser(name)
         p.add_argument('--task', default='corridor_round_trip', help='a task of config/decision.yaml')
         p.add_argument('--location', default='corridor', help='config/scenarios/<location>.yaml')
-        p.add_argument('--out', default=os.path.join(report.WS, 'bench_results', 'control' if name == 'control'
-                                                     else 'campaign'))
+        p.add_argument('--out', default=None, help='default bench_results/control/<task>@<location> (control), '
+                                                    'bench_results/campaign')
         p.add_argument('--port', type=int, default=11411, help='master port in both namespaces')
         p.add_argument('--settle', type=float, default=6.0,
                        help='s after setting a link before profiling (the network monitor window is 5 s)')
         p.add_argument('--control-values', default=os.path.join(report.WS, 'config', 'control_values.yaml'))
         if name == 'control':
             p.add_argument('--runs', type=int, default=20)
+            p.add_argument('--link-map', default=None,
+                           help="a monitoring-mission task's link map (default config/link_map_<location>.yaml)")
         else:
             p.add_argument('--conditions', type=int, default=100)
             p.add_argument('--seed', type=int, default=1)
@@ -137,6 +208,9 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
     args = ap.parse_args(argv)
     args.argv = list(argv if argv is not None else sys.argv[1:])
     args.argv.remove(args.cmd)          # the script's own arguments (the subcommand is the script's choice)
+    if args.out is None:
+        args.out = os.path.join(report.WS, 'bench_results', *(('control', f'{args.task}@{args.location}')
+                                                              if args.cmd == 'control' else ('campaign',)))
     args.out = os.path.abspath(args.out)
     if getattr(args, 'runs', 2) < 2 or getattr(args, 'conditions', 1) < 1:
         ap.error('--runs must be >= 2 and --conditions >= 1')

@@ -24,6 +24,7 @@ from cnr_maps.mapio import load_map
 from cnr_maps.measurements import Measurement, write_tsv
 from cnr_mission.core.report import CellSummary, check_store, path_length, render_png, write_summary
 from cnr_mission.core.scenario import read_mission
+from cnr_mission.core.task import COMPLETED, TIMED_OUT, battery_used
 from cnr_msgs.msg import (BatteryEnergy, CellStates, Hotspot, MergedMeasurement, MfgActivity, MigrationEvent,
                           NetworkProfile, Placement, SearchState, StoreForwardStatus, TaskDecision)
 from cnr_msgs.srv import Decide, EvaluateTask, GetMeasurements
@@ -55,6 +56,7 @@ class MissionMonitor:
         self.trajectory: List[Tuple[float, float]] = []
         self.battery_first: Optional[BatteryState] = None
         self.battery_last: Optional[BatteryState] = None
+        self.battery_at_hotspot: Optional[BatteryState] = None     # the first reading from the hotspot's time on
         self.energy_first: Optional[BatteryEnergy] = None
         self.energy_last: Optional[BatteryEnergy] = None
         self.cells: Optional[CellStates] = None
@@ -118,6 +120,9 @@ class MissionMonitor:
         if self.battery_first is None:
             self.battery_first = msg
         self.battery_last = msg
+        h = self.hotspot
+        if h is not None and self.battery_at_hotspot is None and msg.header.stamp >= h.header.stamp:
+            self.battery_at_hotspot = msg
 
     def _on_activity(self, msg: MfgActivity) -> None:
         self.activity, self.activity_received = msg, rospy.Time.now().to_sec()
@@ -153,18 +158,26 @@ class MissionMonitor:
             if not rospy.is_shutdown():
                 self._say(f'network-aware: no decision ({exc}); the modules stay where they started')
 
-    def evaluate_decision(self, found: bool) -> None:
-        """Eq. 4-5 for the mission's decision (network_monitor's ~evaluate): completed when the hotspot was
-        found, else timed out; T = sim time to the hotspot (or the whole mission), B = battery used."""
-        if not self.decider or not any(d['event'] == 'decided' for d in self.decisions):
-            return
-        h, b0, b1 = self.hotspot, self.battery_first, self.battery_last
+    def task_measures(self, found: bool) -> Tuple[str, float, float]:
+        """The mission as a task (thesis §4.2.3; the network-aware decision's evaluation and the control runs of
+        exp_control.sh): status completed when the hotspot was found, else timed_out; T_task the sim time to the
+        hotspot (or the whole mission); B_task the battery fraction used over the same time (to the first reading
+        from the hotspot's time on, 1 Hz)."""
+        h, b0 = self.hotspot, self.battery_first
+        b1 = self.battery_at_hotspot or self.battery_last
         t = h.header.stamp.to_sec() - self.start_sim if h is not None and self.start_sim is not None \
             else self._sim_since_start()
-        b = b0.percentage - b1.percentage if b0 is not None and b1 is not None else 0.0
+        b = battery_used(b0.percentage, b1.percentage) if b0 is not None and b1 is not None else math.nan
+        return (COMPLETED if found else TIMED_OUT), t, b
+
+    def evaluate_decision(self, found: bool) -> None:
+        """Eq. 4-5 for the mission's decision (network_monitor's ~evaluate), by :meth:`task_measures`."""
+        if not self.decider or not any(d['event'] == 'decided' for d in self.decisions):
+            return
+        status, t, b = self.task_measures(found)
         try:
             res = rospy.ServiceProxy(f'{self.decider}/evaluate', EvaluateTask)(
-                'completed' if found else 'timed_out', t, b, True)
+                status, t, b if math.isfinite(b) else 0.0, True)
             self.evaluation = res.message if res.ok else f'not evaluated: {res.message}'
         except (rospy.ROSException, rospy.ServiceException) as exc:
             self.evaluation = f'not evaluated: {exc}'
@@ -293,8 +306,10 @@ class MissionMonitor:
         h = self.hotspot
         b0, b1 = self.battery_first, self.battery_last
         now = rospy.Time.now().to_sec()
+        status, t_task, b_task = self.task_measures(found)
         summary = dict(
             scenario=self.name, placement=self.placement, found=found,
+            task=dict(mission_status=status, t_task=t_task, b_task=None if math.isnan(b_task) else b_task),
             hotspot=None if h is None else dict(cell=h.cell_index, row=h.row, col=h.col, x=h.x, y=h.y,
                                                 temperature=h.temperature, search_duration=h.search_duration,
                                                 cells_checked=h.cells_checked),
