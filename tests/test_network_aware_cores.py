@@ -187,6 +187,19 @@ def test_pairs_and_oracle():
     assert ps[1].offload == Outcome(9.0, 0.001, ABORTED)
 
 
+def test_noise_aware_oracle_calls_pairs_within_the_control_noise_either():
+    tol = campaign.noise_tolerance(CONTROL)         # sd 2/30 and 0.0002/0.003: each 6.7 %
+    assert tol == pytest.approx(2 * math.sqrt(2) * 0.5 * math.hypot(2 / 30, 0.0002 / 0.003))
+    close = [_result('c1', 'decided', OFFLOAD, COMPLETED, 30.6, 0.003), _result('c1', 'other', ONLOAD, COMPLETED, 30, 0.003)]
+    far = [_result('c2', 'decided', OFFLOAD, COMPLETED, 40, 0.004), _result('c2', 'other', ONLOAD, COMPLETED, 30, 0.003)]
+    failed = [_result('c3', 'decided', OFFLOAD, ABORTED, 30, 0.003), _result('c3', 'other', ONLOAD, COMPLETED, 30.1, 0.003)]
+    ps = campaign.pairs(close + far + failed)
+    assert [campaign.oracle(p, CONTROL) for p in ps] == [ONLOAD, ONLOAD, ONLOAD]           # strict: a winner each
+    assert [campaign.oracle(p, CONTROL, tol) for p in ps] == [campaign.EITHER, ONLOAD, ONLOAD]
+    assert campaign.agrees(OFFLOAD, campaign.EITHER) and campaign.agrees(ONLOAD, campaign.EITHER)
+    assert campaign.agrees(ONLOAD, ONLOAD) and not campaign.agrees(OFFLOAD, ONLOAD)
+
+
 def test_static_rule_fit_and_learning_curve():
     from test_network_monitor_decision import SETTINGS, row
     rows = [row(0.01 * i, 50.0, OFFLOAD if i < 8 else ONLOAD, timestamp=1.7e9 + i) for i in range(20)]

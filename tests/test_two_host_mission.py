@@ -152,8 +152,8 @@ def test_the_network_aware_mission_decides_at_the_start_and_reports_each_decisio
     """--network-aware patrol on the paper's dead-zone link map: network_monitor's migration_decider decides for
     the MFG and the global goal manager when the mission starts (an empty training set: the cold-start rule, an
     exploration, or no usable profile), they are placed accordingly, the link then dies in the middle of the corridor and the
-    hotspot is still found; the report lists each decision with its profile, and the evaluation (none for
-    patrol: its control values are not measured, which the report says)."""
+    hotspot is still found; the report lists each decision with its profile, and the evaluation by Eq. 4-5
+    against the patrol task's control values (config/control_values.yaml, exp_control.sh --task patrol)."""
     status, s, report, out = two_host(tmp_path, 'all_robot', '--network-aware', 'patrol', '--link-map',
                                       os.path.join(WS, 'config', 'link_map_corridor.yaml'), '--training-dir',
                                       str(tmp_path / 'training'), timeout=900)
@@ -176,5 +176,7 @@ def test_the_network_aware_mission_decides_at_the_start_and_reports_each_decisio
         rows = [line.split('\t') for line in f.read().splitlines()[1:]]
     assert host in {r[2] for r in rows if r[1] == 'mfg'}, rows
     assert os.path.exists(os.path.join(report, 'decisions.tsv'))
-    assert na['evaluation'] and 'no control values' in na['evaluation'], na['evaluation']
+    ev = na['evaluation'] or ''
+    assert 'completed: T ' in ev and '(CT ' in ev and '(CB ' in ev and 'V_r' in ev and 'label ' in ev, ev
+    assert s['task']['mission_status'] == 'completed' and s['task']['t_task'] == pytest.approx(s['sim_time_to_find'])
     assert 'network-aware: patrol@corridor' in out and 'Traceback' not in out

@@ -94,6 +94,10 @@ class TaskRunner:
             while outcome is None and not rospy.is_shutdown():
                 state = self.client.get_state()
                 if state == GoalStatus.SUCCEEDED:
+                    # the status array says so before the result message comes: take the result too (bounded),
+                    # else this goal's last transition reaches the client after the next goal replaced it and
+                    # actionlib logs "a goal handle that we're not tracking"
+                    self.client.wait_for_result(rospy.Duration(1.0))
                     outcome = SUCCEEDED
                 elif state in FAILED_STATES:
                     outcome = GAVE_UP
