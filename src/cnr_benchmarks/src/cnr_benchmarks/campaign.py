@@ -43,26 +43,35 @@ THESIS_CT, THESIS_CT_SD = 87.9286, 14.3815          # s, Table 4-5
 THESIS_CB, THESIS_CB_SD = 0.004586, 0.000702        # battery fraction, Table 4-5
 
 
+def two_host_argv(location: str, report_dir: str, port: int) -> Optional[List[str]]:
+    """The two_host_mission command for the location's scenario with every module on the robot at the start;
+    None (the scenario's problem printed in one line) when check_scenario refuses it."""
+    cfg_dir = os.path.join(report.WS, 'config')
+    scenario = os.path.join(cfg_dir, 'scenarios', f'{location}.yaml')
+    line = subprocess.run(['rosrun', 'cnr_mission', 'check_scenario', scenario], capture_output=True, text=True)
+    if line.returncode != 0:
+        print(line.stderr.strip(), file=sys.stderr)
+        return None
+    _name, map_file, x, y, a = line.stdout.split()
+    return ['rosrun', 'cnr_mission', 'two_host_mission', '--config-dir', cfg_dir, '--scenario', scenario,
+            '--map', map_file, '--start', x, y, a, '--placement', 'all_robot', '--report-dir', report_dir,
+            '--port', str(port)]
+
+
 def run_session(args: argparse.Namespace, plan: Dict, results: str, training_dir: str, control_values: str) -> int:
     """Write the plan and run the two-host task session over it (its output passes through)."""
     os.makedirs(args.out, exist_ok=True)
     plan_path = os.path.join(args.out, 'plan.yaml')
     with open(plan_path, 'w') as f:
         yaml.safe_dump(plan, f, sort_keys=False)
-    cfg_dir = os.path.join(report.WS, 'config')
-    scenario = os.path.join(cfg_dir, 'scenarios', f'{plan["location"]}.yaml')
-    line = subprocess.run(['rosrun', 'cnr_mission', 'check_scenario', scenario], capture_output=True, text=True)
-    if line.returncode != 0:
-        print(line.stderr.strip(), file=sys.stderr)
-        return 2
-    _name, map_file, x, y, a = line.stdout.split()
     session = os.path.join(args.out, 'session')
     if os.path.exists(session):
         os.replace(session, f'{session}.prev{int(time.time())}')
-    argv = ['rosrun', 'cnr_mission', 'two_host_mission', '--config-dir', cfg_dir, '--scenario', scenario,
-            '--map', map_file, '--start', x, y, a, '--placement', 'all_robot', '--report-dir', session,
-            '--port', str(args.port), '--task-plan', plan_path, '--task-results', results,
-            '--training-dir', training_dir, '--control-values', control_values]
+    argv = two_host_argv(plan['location'], session, args.port)
+    if argv is None:
+        return 2
+    argv += ['--task-plan', plan_path, '--task-results', results, '--training-dir', training_dir,
+             '--control-values', control_values]
     report.progress(f'[campaign] {len(plan["runs"])} runs of {plan["task"]}@{plan["location"]}; rows in {results}')
     return subprocess.call(argv)
 
@@ -119,11 +128,6 @@ def control_missions(args: argparse.Namespace, scenario: str) -> int:
         print(f'exp_control: {args.task!r} is neither a task of {scenario} (tasks) nor of config/decision.yaml '
               f'(tasks)', file=sys.stderr)
         return 2
-    line = subprocess.run(['rosrun', 'cnr_mission', 'check_scenario', scenario], capture_output=True, text=True)
-    if line.returncode != 0:
-        print(line.stderr.strip(), file=sys.stderr)
-        return 2
-    _name, map_file, x, y, a = line.stdout.split()
     link_map = args.link_map
     if link_map is None:
         default = os.path.join(report.WS, 'config', f'link_map_{args.location}.yaml')
@@ -138,10 +142,10 @@ def control_missions(args: argparse.Namespace, scenario: str) -> int:
                 os.replace(run, f'{run}.prev{int(time.time())}')
             report.progress(f'[control] run {i}/{args.runs}: {args.task}@{args.location} mission, every module on '
                             f'the robot' + (f', link map {os.path.relpath(link_map, report.WS)}' if link_map else ''))
-            argv = ['rosrun', 'cnr_mission', 'two_host_mission', '--config-dir', os.path.join(report.WS, 'config'),
-                    '--scenario', scenario, '--map', map_file, '--start', x, y, a, '--placement', 'all_robot',
-                    '--migration', '--report-dir', run, '--port', str(args.port)]
-            rc = subprocess.call(argv + (['--link-map', link_map] if link_map else []))
+            argv = two_host_argv(args.location, run, args.port)
+            if argv is None:
+                return 2
+            rc = subprocess.call(argv + ['--migration'] + (['--link-map', link_map] if link_map else []))
             if rc not in (0, 3) or not os.path.exists(summary):
                 print(f'exp_control: run {i} ended with status {rc} and no report ({run}); run the same command '
                       f'again to resume', file=sys.stderr)
