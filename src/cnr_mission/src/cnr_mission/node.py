@@ -175,9 +175,12 @@ class MissionMonitor:
         if not self.decider or not any(d['event'] == 'decided' for d in self.decisions):
             return
         status, t, b = self.task_measures(found)
+        if not math.isfinite(b):
+            self.evaluation = 'not evaluated: no battery reading (the simulator\'s battery_state never came)'
+            self._say(f'network-aware: {self.evaluation}')
+            return
         try:
-            res = rospy.ServiceProxy(f'{self.decider}/evaluate', EvaluateTask)(
-                status, t, b if math.isfinite(b) else 0.0, True)
+            res = rospy.ServiceProxy(f'{self.decider}/evaluate', EvaluateTask)(status, t, b, True)
             self.evaluation = res.message if res.ok else f'not evaluated: {res.message}'
         except (rospy.ROSException, rospy.ServiceException) as exc:
             self.evaluation = f'not evaluated: {exc}'
