@@ -14,12 +14,14 @@ import threading
 import time
 
 import pytest
+import yaml
 
 from cnr_harness import wait_until
 from cnr_testbed import cpucap
 from cnr_testbed.core.cpucap import NoCgroup
 
 PY = sys.executable
+WS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 BUSY = ('import sys, time\nt, c = time.monotonic(), time.process_time()\n'
         'while time.monotonic() - t < float(sys.argv[1]): pass\n'
         'print(time.process_time() - c, time.monotonic() - t)\n')
@@ -136,7 +138,7 @@ def test_usage_reader_follows_removal_and_recreation(name):
 @pytest.fixture
 def testbed():
     from cnr_testbed.api import Testbed
-    from cnr_testbed.cli import WS, overrides
+    from cnr_testbed.cli import overrides
     tb = Testbed(os.path.join(WS, 'config', 'testbed.yaml'), overrides(f'tcap{os.getpid() % 10000}'))
     with tb:
         yield tb
@@ -160,7 +162,8 @@ def test_robot_side_capped_and_its_tun_device_counted(testbed):
 
 
 def test_battery_charges_exactly_the_robot_cgroup(ros, name):
-    """Under load from itself, the simulator charges the CPU time of the robot's cgroup and nothing else."""
+    """Under load from itself, the simulator charges the CPU time of the robot's cgroup and nothing else, each
+    second at the robot CPU's full-load power over the cgroup's limit (launch arg battery_cpu_capacity)."""
     import rospy
     from cnr_msgs.msg import BatteryEnergy
     cg = cpucap.CpuCgroup(LAYOUT, name)
@@ -173,7 +176,8 @@ def test_battery_charges_exactly_the_robot_cgroup(ros, name):
             msgs.append(msg)
 
     sub = rospy.Subscriber('battery/energy', BatteryEnergy, on_energy, queue_size=10)
-    sim = ros.master.roslaunch('cnr_sim', 'simulator.launch', f'battery_cpu_cgroup:={name}')
+    sim = ros.master.roslaunch('cnr_sim', 'simulator.launch', f'battery_cpu_cgroup:={name}',
+                               'battery_cpu_capacity:=0.25')
     try:
         wait_until(lambda: msgs or not sim.alive(), 90, 'battery/energy from the simulator')
         assert sim.alive(), sim.output()[-2000:]
@@ -185,7 +189,9 @@ def test_battery_charges_exactly_the_robot_cgroup(ros, name):
         time.sleep(2.5)                                                    # more samples: nothing else is added
         last = msgs[-1]
         assert last.cpu_seconds == pytest.approx(used, abs=0.05), (last.cpu_seconds, used)
-        assert last.cpu == pytest.approx(7.5 * last.cpu_seconds, rel=1e-6)   # config/battery.yaml k_cpu
+        with open(os.path.join(WS, 'config', 'battery.yaml')) as f:
+            power = yaml.safe_load(f)['battery']['cpu_full_load_power']
+        assert last.cpu == pytest.approx(power / 0.25 * last.cpu_seconds, rel=1e-6)
         assert last.total == pytest.approx(last.idle + last.motors + last.cpu + last.radio)
         assert last.idle > 0 and last.header.stamp.to_sec() > 0
     finally:
