@@ -122,9 +122,8 @@ def write_control(args: argparse.Namespace, rows: List[Dict]) -> int:
 
 def control_missions(args: argparse.Namespace, scenario: str) -> int:
     """The control runs of a monitoring-mission task (module docstring): one two-host mission per run."""
-    with open(os.path.join(report.WS, 'config', 'decision.yaml')) as f:
-        mission_tasks = (yaml.safe_load(f) or {}).get('tasks') or {}
-    if args.task not in mission_tasks:
+    from network_monitor.core.decision_config import load_decision_config
+    if args.task not in load_decision_config(os.path.join(report.WS, 'config', 'decision.yaml')).tasks:
         print(f'exp_control: {args.task!r} is neither a task of {scenario} (tasks) nor of config/decision.yaml '
               f'(tasks)', file=sys.stderr)
         return 2
