@@ -49,6 +49,7 @@ class LeaseDriver:
         self.grantor = Grantor(module, duration, margin)
         self.lock = threading.Lock()
         self.answering = True
+        self.last_promotion_active = False
         self.statuses: Dict[str, Optional[InstanceStatus]] = {h: None for h in self.hosts}
         self.pub = rospy.Publisher(f'/migration/{module}/lease', MigrationLease, queue_size=50)
         self.subs = [rospy.Subscriber(f'/migration/{module}/renew', MigrationRenew, self._on_renew, queue_size=50)]
@@ -67,6 +68,9 @@ class LeaseDriver:
         with self.lock:
             if not self.answering:
                 return
+            if msg.term == 0:                 # a standby's request: kept for a pre-granted promotion
+                self.grantor.standby_request(msg.instance, msg.nonce, time.monotonic())
+                return
             a = self.grantor.request(msg.instance, msg.term, msg.nonce, time.monotonic())
         self.pub.publish(MigrationLease(module=a.module, term=a.term, holder=a.holder, nonce=a.nonce,
                                         granted=a.granted, duration=a.duration))
@@ -83,13 +87,19 @@ class LeaseDriver:
         rospy.wait_for_service(f'/migration/{self.module}/{host or self.host}/control', timeout)
         return self.wait_role('standby', timeout, host)
 
-    def promote(self, state: Optional[Dict[str, Any]] = None, host: str = '') -> int:
+    def promote(self, state: Optional[Dict[str, Any]] = None, host: str = '', pregrant: bool = False) -> int:
+        """Promote (with ``pregrant``: the order carries the lease for the instance's newest standby request, as
+        the manager does; the instance must then answer that it is active)."""
         host = host or self.host
         with self.lock:
             term = self.grantor.promote(instance_id(self.module, host), time.monotonic())
+            nonce, duration = (self.grantor.pregrant(instance_id(self.module, host), time.monotonic())
+                               if pregrant else (0, 0.0))
         data = codec.encode(self.module, state) if state is not None else b''
-        res = self.controls[host]('promote', term, data)
+        res = self.controls[host](command='promote', term=term, state=data, nonce=nonce, duration=duration)
         assert res.ok, res.message
+        assert res.active or not nonce, f'pre-granted promotion to term {term} but not active'
+        self.last_promotion_active = res.active
         return term
 
     def wait_active(self, timeout: float, host: str = '') -> InstanceStatus:
@@ -97,14 +107,14 @@ class LeaseDriver:
 
     def freeze(self, host: str = '') -> Dict[str, Any]:
         host = host or self.host
-        res = self.controls[host]('freeze', self.grantor.term, b'')
+        res = self.controls[host](command='freeze', term=self.grantor.term)
         assert res.ok, res.message
         with self.lock:
             self.grantor.release(instance_id(self.module, host), self.grantor.term)
         return codec.decode(self.module, res.state)
 
     def state(self, host: str = '') -> Dict[str, Any]:
-        res = self.controls[host or self.host]('state', 0, b'')
+        res = self.controls[host or self.host](command='state')
         assert res.ok, res.message
         return codec.decode(self.module, res.state)
 

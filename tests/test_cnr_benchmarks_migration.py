@@ -1,7 +1,7 @@
 """bench_migration's analysis: consumer-side downtime from probe rows, stray outputs, the grouped table."""
 import math
 
-from cnr_benchmarks.core.migration import ProbeRow, group_results, handover_gap, stray_outputs
+from cnr_benchmarks.core.migration import ProbeRow, group_results, handover_downtime, handover_gap, stray_outputs
 
 
 def rows(spec):
@@ -29,9 +29,23 @@ def test_table_groups_and_percentiles():
     res = [dict(rtt='50', module='mfg', mode='cold', outcome='done', consumer_gap=str(g), manager_downtime='0.1')
            for g in (0.1, 0.2, 0.3, 0.4)] + [dict(rtt='50', module='mfg', mode='cold', outcome='rolled_back',
                                                     consumer_gap='', manager_downtime='')]
+    res[0]['downtime'] = '0.05'
     (g,) = group_results(res, ('rtt', 'module', 'mode'))
-    row = g.row()
-    assert row[:5] == ['50', 'mfg', 'cold', '4/5', '4'] and row[5] == '250' and row[7] == '400'
+    row = dict(zip(('rtt', 'module', 'mode') + g.HEADER, g.row()))
+    assert row['done'] == '4/5' and row['gaps'] == '4' and row['gap p50'] == '250' and row['gap max'] == '400'
+    assert row['downtime p50'] == '50' and row['manager p50'] == '100'
+
+
+def test_downtime_runs_from_the_old_instance_closing_its_outputs_to_the_new_one_s_first_output():
+    r = rows([(9.0, '/mfg/activity', 'mfg@robot', True), (9.9, 'frozen', 'mfg@robot', True),
+              (9.95, '/mfg/activity', 'mfg@robot', True),          # in flight when it froze: not the new one
+              (10.02, '/mfg/activity', 'mfg@cloud', True), (11.0, '/mfg/activity', 'mfg@cloud', True)])
+    assert math.isclose(handover_downtime(r, 'mfg', 'robot', 'cloud', 9.8, 10.1), 0.12)
+    assert math.isclose(handover_gap(r, 'mfg', 'robot', 'cloud', 9.8, 10.1), 0.07)
+    assert handover_downtime(r[:1] + r[2:], 'mfg', 'robot', 'cloud', 9.8, 10.1) is None    # not frozen: failover
+    gg = rows([(9.0, 'next_goal', '', True), (9.5, 'frozen', 'global_goal_manager@cloud', True),
+               (9.55, 'next_goal', '', False), (9.65, 'next_goal', '', True)])
+    assert math.isclose(handover_downtime(gg, 'global_goal_manager', 'cloud', 'robot', 9.4, 9.7), 0.15)
 
 
 def test_a_move_base_gap_across_a_finished_goal_is_not_a_hand_over():

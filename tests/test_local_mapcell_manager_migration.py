@@ -178,7 +178,7 @@ def test_hand_over_between_two_instances_stores_every_measurement_exactly_once(l
     frozen_at = len(stream.sent)
     stream.wait_sent(frozen_at + 15)                               # only B receives these
     wrong = dict(state, grid=dict(state['grid'], cols=12))         # a state that does not fit is refused
-    res = control_b('promote', 99, codec.encode(MODULE, wrong))
+    res = control_b(command='promote', term=99, state=codec.encode(MODULE, wrong))
     assert not res.ok and 'grid' in res.message, res.message
     assert read_tsv(str(tmp / 'cloud.tsv')) == [] and not served(ros, f'/{MODULE}_b')    # B stored nothing yet
     promoted_at = time.monotonic()

@@ -141,7 +141,7 @@ def test_three_instances_hand_over_a_search_and_a_patrol_goal(mission, mfg_param
         assert not any(rec.since(k, 0.0) for k in ('goal', 'cancel', 'state', 'hotspot', 'activity')), rec.log
         # a state that does not fit is refused (the promotion with it fails), quietly, and changes nothing
         bad = dict(s, search={'ic': 5}, trigger=None)
-        res = driver.control('promote', 1, codec.encode('mfg', bad))
+        res = driver.control(command='promote', term=1, state=codec.encode('mfg', bad))
         assert not res.ok and 'mfg state: search.ic_mean: missing' in res.message, res
         assert driver.state() != bad and driver.state()['search'] is None
         t = now()

@@ -78,7 +78,7 @@ def test_a_cut_off_instance_closes_its_outputs_and_a_bad_state_is_refused(gg):
     proc, driver = gg
     driver.wait_standby(30)
     control = rospy.ServiceProxy('/migration/global_goal_manager/robot/control', InstanceControl)
-    bad = control('promote', 1, codec.encode('global_goal_manager', {'policy': 'least_recently_visited'}))
+    bad = control(command='promote', term=1, state=codec.encode('global_goal_manager', {'policy': 'least_recently_visited'}))
     assert not bad.ok and 'policy' in bad.message
     driver.promote()
     driver.wait_active(10)
@@ -88,3 +88,15 @@ def test_a_cut_off_instance_closes_its_outputs_and_a_bad_state_is_refused(gg):
     res = next_goal()
     assert not res.success and 'not the active instance' in res.message
     assert proc.alive() and 'Traceback' not in proc.output()
+
+
+def test_a_promotion_carrying_the_lease_of_a_standby_request_is_active_when_answered(gg):
+    """The hot hand-over's fast path: a standby sends requests (term 0); the promotion grants its newest one, so
+    the instance opens its outputs before it answers, without a round trip for its first renewal."""
+    proc, driver = gg
+    driver.wait_standby(30)
+    wait_until(lambda: driver.instance in driver.grantor.standby, 10, 'a standby request from the instance')
+    driver.promote(pregrant=True)
+    assert driver.last_promotion_active
+    assert next_goal().success                             # its service was registered before it answered
+    driver.wait_active(5)

@@ -101,7 +101,8 @@ def test_a_superseded_holder_is_never_active_again_until_promoted_anew():
 
 def test_never_two_active_under_random_delays_losses_and_failovers():
     """A cloud holder renews over a link with random delays, losses and outages; the grantor fails over to the
-    robot whenever the cloud's lease lapses and back when asked: at no sampled instant are both active."""
+    robot whenever the cloud's lease lapses and back when asked, each promotion carrying a pre-grant of the
+    target's newest standby request and reaching it late or never: at no sampled instant are both active."""
     import random
     rng = random.Random(7)
     g = Grantor('mfg', D, MARGIN)
@@ -109,37 +110,86 @@ def test_never_two_active_under_random_delays_losses_and_failovers():
     holders['cloud'].promoted(g.promote('mfg@cloud', 0.0))
     in_flight = []                                  # (deliver_at, kind, payload)
     t, dt = 0.0, 0.01
-    both = 0
-    while t < 120.0:
+    both = pregranted_active = 0
+    while t < 240.0:
         outage = (int(t) // 10) % 3 == 2            # 10 s out of every 30 s
+
+        def send(name: str, kind: str, payload) -> None:
+            delay = 0.0 if name == 'robot' else rng.uniform(0.005, 0.4)
+            if name == 'robot' or (not outage and rng.random() > 0.05):
+                in_flight.append((t + delay, kind, (name, delay) + payload))
+
         for name, h in holders.items():
-            if h.term and not h.superseded and round(t / 0.1) == t / 0.1 or (h.term and rng.random() < 0.1):
-                nonce = h.request(t)
-                delay = 0.0 if name == 'robot' else rng.uniform(0.005, 0.4)
-                if name == 'robot' or (not outage and rng.random() > 0.05):
-                    in_flight.append((t + delay, 'req', (name, h.term, nonce, delay)))
-        for item in sorted([x for x in in_flight if x[0] <= t]):
+            if round(t / 0.1) == t / 0.1 or rng.random() < 0.1:
+                if h.term and not h.superseded:
+                    send(name, 'req', (h.term, h.request(t)))
+                elif not h.active(t):                # a standby's request, for a pre-grant
+                    send(name, 'standby', (h.request(t),))
+        for item in sorted([x for x in in_flight if x[0] <= t], key=lambda x: x[0]):
             in_flight.remove(item)
             _, kind, payload = item
+            name, delay = payload[:2]
             if kind == 'req':
-                name, term, nonce, delay = payload
+                term, nonce = payload[2:]
                 a = g.request(instance_id('mfg', name), term, nonce, t)
                 if name == 'robot' or not outage:
-                    in_flight.append((t + delay, 'ans', (name, a)))
+                    in_flight.append((t + delay, 'ans', (name, delay, a)))
+            elif kind == 'standby':
+                g.standby_request(instance_id('mfg', name), payload[2], t)
+            elif kind == 'promote':
+                term, nonce, duration = payload[2:]
+                try:
+                    holders[name].promoted(term, nonce, duration)
+                except ValueError:
+                    pass                             # a late order for an old term: refused
+                pregranted_active += holders[name].active(t)
             else:
-                name, a = payload
-                holders[name].on_answer(a)
+                holders[name].on_answer(payload[2])
         # failover to the robot when the cloud lapsed; back to the cloud when the link is good
         holder = g.holder.rpartition('@')[2]
         if holder == 'cloud' and t > g.valid_until and g.valid_until > 0:
             g.revoke()
+        if holder == 'robot' and not outage and rng.random() < 0.005:      # a planned move back: freeze, release
+            robot = holders['robot']
+            robot.superseded, robot.valid_until = True, float('-inf')
+            assert g.release('mfg@robot', robot.term)
         if not g.holder and g.may_promote(t):
             target = 'cloud' if not outage and holder != 'cloud' and rng.random() < 0.5 else 'robot'
-            holders[target].promoted(g.promote(instance_id('mfg', target), t))
+            term = g.promote(instance_id('mfg', target), t)
+            send(target, 'promote', (term,) + g.pregrant(instance_id('mfg', target), t))
         if all(h.active(t) for h in holders.values()):
             both += 1
         t = round(t + dt, 6)
+    assert pregranted_active > 5                   # the pre-grants were exercised
     assert both == 0
+
+
+def test_a_promotion_carrying_a_standby_request_is_active_at_once_and_ends_before_the_grantor_believes():
+    g, h = started(), Holder('mfg', 'mfg@cloud')
+    nonce = h.request(1.0)                          # sent by the standby at 1.0, received at 1.1
+    g.standby_request('mfg@cloud', nonce, 1.1)
+    assert g.release('mfg@robot', g.term)
+    term = g.promote('mfg@cloud', 1.2)
+    assert g.pregrant('mfg@cloud', 1.2) == (nonce, D)
+    h.promoted(term, nonce, D)                      # arrives at 1.3
+    assert h.active(1.3) and not h.active(1.0 + D)
+    assert 1.0 + D < g.free_at() and not g.may_promote(1.2 + D + MARGIN - 1e-6)   # a rollback waits it out
+
+
+def test_no_pregrant_from_a_stale_or_unknown_standby_request():
+    g = started()
+    g.standby_request('mfg@cloud', 7, 1.0)
+    assert g.release('mfg@robot', g.term)
+    g.promote('mfg@cloud', 1.0 + D)                 # the request is a lease duration old
+    assert g.pregrant('mfg@cloud', 1.0 + D) == (0, D) and g.may_promote(1.0 + D)
+    h = Holder('mfg', 'mfg@cloud')                  # a restarted process: it never sent that nonce
+    h.promoted(g.term, 7, D)
+    assert not h.active(1.0 + D)
+    g2 = started()
+    g2.standby_request('mfg@cloud', 9, 0.5)
+    assert g2.pregrant('mfg@cloud', 0.5) == (0, D)  # not the holder: nothing granted
+    a, b = Holder('mfg', 'mfg@robot'), Holder('mfg', 'mfg@robot')
+    assert a.request(0.0) != b.request(0.0)         # nonces of two processes differ
 
 
 def test_term_filter_accepts_only_the_current_holder():

@@ -80,6 +80,7 @@ class Bed:
         self.manager = self.robot.run(['rosrun', 'migration_manager', 'migration_manager'], 'manager')
         self.probe_file = logs / 'probe.tsv'
         self.robot.call('setParam', '/migration_probe', dict(topics=['/global_goal'], next_goal_rate=20.0,
+                                                              status_modules=[MODULE], hosts=['robot', 'cloud'],
                                                               out=str(self.probe_file)))
         self.robot.run(['rosrun', 'migration_manager', 'migration_probe'], 'probe')
         wait_until(lambda: self.placement().get(MODULE, ('',))[0] == 'robot', 120, f'{MODULE} active on the robot')

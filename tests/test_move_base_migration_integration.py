@@ -245,7 +245,7 @@ def test_a_goal_continues_through_a_migration_and_only_the_holder_drives(ros, wo
 
     # a state that does not fit is refused, naming the field (and B stays a standby)
     bad = dict(state, goal=dict(g, id=7))
-    res = driver.controls['cloud']('promote', 1000, codec.encode('move_base', bad))
+    res = driver.controls['cloud'](command='promote', term=1000, state=codec.encode('move_base', bad))
     assert not res.ok and 'goal.id' in res.message, res
     driver.wait_role('standby', 5, host='cloud')
 

@@ -29,14 +29,14 @@ import yaml
 
 from cnr_benchmarks import report
 from migration_manager.cli import parse_placement
-from cnr_benchmarks.core.migration import (OUTPUT_TOPIC, group_results, handover_gap, output_flowing, output_period,
-                                           read_probe, stray_outputs)
+from cnr_benchmarks.core.migration import (OUTPUT_TOPIC, Group, group_results, handover_downtime, handover_gap,
+                                           output_flowing, output_period, read_probe, stray_outputs)
 
 # a module counts as working when its output came this recently [s] (move_base: a goal is being driven)
 FLOWING_WITHIN = {'move_base': 0.3, 'local_mapcell_manager': 1.5, 'mfg': 2.5, 'global_goal_manager': 0.5}
 
-COLUMNS = ['rtt_ms', 'module', 'mode', 'direction', 'run', 'outcome', 'manager_downtime', 'consumer_gap', 'stray',
-           'duration', 'term']
+COLUMNS = ['rtt_ms', 'module', 'mode', 'direction', 'run', 'outcome', 'manager_downtime', 'consumer_gap', 'downtime',
+           'stray', 'duration', 'term']
 FAILOVER_COLUMNS = ['rtt_ms', 'module', 'standby', 'trial', 'promoted_after', 'output_after', 'outcome']
 RESULT = re.compile(r'migration (\d+): (\S+) -> (\S+): (\S+) \(term (\d+), ([\d.]+) s(?:; hand-over (\d+) ms)?\)')
 
@@ -114,7 +114,7 @@ class Bench:
             raise RuntimeError(f'the modules did not come up (see {self.out}/mission.log and the report logs)')
         self.robot.call('setParam', '/migration_probe', dict(
             topics=sorted({t for m, t in OUTPUT_TOPIC.items() if t.startswith('/')} | {'/merged_measurements'}),
-            next_goal_rate=10.0, out=self.probe_file))
+            next_goal_rate=10.0, status_modules=list(OUTPUT_TOPIC), hosts=['robot', 'cloud'], out=self.probe_file))
         self.robot.run(['rosrun', 'migration_manager', 'migration_probe'], 'probe')
         report.progress('all modules active on the robot; probe running')
 
@@ -148,7 +148,7 @@ class Bench:
                     for source, target in (('robot', 'cloud'), ('cloud', 'robot')):
                         if mode == 'hot' and not self.warm_standby(module, target):
                             results.row(rtt_ms=rtt, module=module, mode=mode, direction=f'{source}->{target}', run=run,
-                                        outcome='no_standby', manager_downtime='', consumer_gap='', stray='',
+                                        outcome='no_standby', manager_downtime='', consumer_gap='', downtime='', stray='',
                                         duration=0.0, term='')
                             continue
                         self.wait_flowing(module)
@@ -156,13 +156,16 @@ class Bench:
                         time.sleep(self.args.settle)
                         rows = read_probe(self.probe_file)
                         gap = handover_gap(rows, module, source, target, r['t0'], r['t1'])
+                        down = handover_downtime(rows, module, source, target, r['t0'], r['t1'])
                         stray = stray_outputs(rows, module, source, target, r['t0'], r['t1'])
                         results.row(rtt_ms=rtt, module=module, mode=mode, direction=f'{source}->{target}', run=run,
                                     outcome=r['outcome'], manager_downtime=r['manager_downtime'],
-                                    consumer_gap='' if gap is None else gap, stray=stray,
+                                    consumer_gap='' if gap is None else gap, downtime='' if down is None else down,
+                                    stray=stray,
                                     duration=r['duration'], term=r['term'])
                         report.progress(f'RTT {rtt:g} ms {module} {mode} {source}->{target} #{run}: {r["outcome"]}, '
-                                        f'hand-over (manager) {r["manager_downtime"]}, consumer gap '
+                                        f'hand-over (manager) {r["manager_downtime"]}, downtime '
+                                        f'{"–" if down is None else f"{1000 * down:.0f} ms"}, consumer gap '
                                         f'{"–" if gap is None else f"{1000 * gap:.0f} ms"}, {r["duration"]:.1f} s')
                         if r['outcome'] != 'done':
                             report.progress(f'    {r["text"][-300:]}')
@@ -224,15 +227,18 @@ class Bench:
 def write_markdown(out: str, args: argparse.Namespace, results: List[Dict], failovers: List[Dict],
                    summary: Dict, aborted: int, started: str, probe_file: str) -> None:
     from cnr_benchmarks.core.migration import percentile
-    header = ['done', 'gaps', 'gap p50', 'gap p95', 'gap max', 'manager p50', 'manager p95']
+    header = list(Group.HEADER)
     probe = read_probe(probe_file) if os.path.exists(probe_file) else []
     periods = {m: output_period(probe, m) for m in args.modules}
     lines = [f'# Migration downtime ({started}, {platform.node()}, {os.cpu_count()} cores)', '',
              f'`launch_scripts/bench_migration.sh {" ".join(args.argv)}`', '',
-             'Consumer gap: last output of the old instance to the first of the new one, measured on the robot '
-             '(migration_probe); manager: freeze answered -> first lease granted. ms; median / p95 / max over both '
-             'directions. "gaps" = migrations whose gap could be told (move_base: not when its goal ended during '
-             'the hand-over). Without any migration a consumer already sees the output period between two outputs: '
+             'Downtime: the old instance closed its outputs (its frozen status\'s stamp) -> the first output of the '
+             'new one arrives at the consumer on the robot (migration_probe; one clock for both hosts on the '
+             'testbed). Consumer gap: last output of the old instance to the first of the new one, measured on the '
+             'robot; it holds the module\'s own output period too. Manager: freeze answered -> the target active '
+             '(its promotion answered, or its first lease granted). ms; median / p95 / max over both directions. '
+             '"gaps" = migrations whose gap could be told (move_base: not when its goal ended during the '
+             'hand-over). Without any migration a consumer already sees the output period between two outputs: '
              + ', '.join(f'{m} {1000 * p:.0f} ms' for m, p in periods.items() if p == p) + '.', '',
              report.markdown_table(['RTT ms', 'module', 'mode', *header],
                                    [g.row() for g in group_results(results, ('rtt_ms', 'module', 'mode'))]),

@@ -7,9 +7,11 @@ manager (``~migration/role`` empty or absent: every single-master and fixed-plac
 *unmanaged*: always active, no extra topics. Managed, it follows the lease protocol of
 :mod:`migration_manager.core.lease`:
 
-- standby: inputs connected, outputs closed (``active`` is False), no lease;
-- promote(term, state): ``set_state`` (if a state came), then renewal requests every ``renew_period``; active
-  from the first granted renewal (``on_active``) while renewals keep being granted;
+- standby: inputs connected, outputs closed (``active`` is False), no lease; it sends standby requests (term
+  0) every ``renew_period``, which the manager does not answer but may grant with a promotion;
+- promote(term, state, nonce, duration): ``set_state`` (if a state came); active at once (``on_active`` before
+  the order is answered) if the order grants one of its standby requests, else from the first granted renewal;
+  renewal requests every ``renew_period``, active while they keep being granted;
 - a lapse (no grant for ``duration``, e.g. cut off): outputs closed until renewals are granted again;
 - superseded (a newer term or another holder announced) or frozen: outputs closed for good (``on_frozen``);
   a superseded instance shuts its node down (its agent starts a fresh standby if one is wanted here);
@@ -84,7 +86,10 @@ class ManagedInstance:
             distinct_callerid(section.string('host'))
         self.lock = threading.RLock()
         self.frozen = False
+        self.frozen_wall = 0.0             # wall time the outputs were closed for good (the status's stamp then)
         self.was_active = False
+        self.activation = threading.Lock()     # on_active / lapse transitions: one thread at a time
+        self.wake = threading.Event()          # the loop's sleep, cut short after a promotion
         self.message = ''
         if not self.managed:
             return
@@ -137,12 +142,15 @@ class ManagedInstance:
         ready = role != 'standby' or bool(self.hooks.standby_ready())
         msg = InstanceStatus(module=self.module, instance=self.id, role=role, term=self.holder.term,
                              ready=ready, pid=os.getpid(), message=self.message)
-        msg.header.stamp = rospy.Time.from_sec(time.time())
+        # frozen: stamped with the moment the outputs were closed (a consumer measures the downtime from it)
+        msg.header.stamp = rospy.Time.from_sec(self.frozen_wall if role == 'frozen' else time.time())
         self.status_pub.publish(msg)
 
     def _on_lease(self, msg: MigrationLease) -> None:
         with self.lock:
             self.holder.on_answer(Answer(msg.module, msg.term, msg.holder, msg.nonce, msg.granted, msg.duration))
+        if msg.granted and msg.holder == self.id and not self.was_active:
+            self.wake.set()                   # the first grant of a promotion: the loop opens the outputs now
 
     def _state_bytes(self) -> bytes:
         return state_codec.encode(self.module, self.hooks.get_state())
@@ -165,6 +173,7 @@ class ManagedInstance:
                         return InstanceControlResponse(ok=False, term=self.holder.term,
                                                        message=f'not at term {req.term}')
                     self.frozen = True
+                    self.frozen_wall = time.time()
                     data = self._state_bytes()
                 self.message = f'frozen at term {req.term}'
                 self.hooks.on_frozen()
@@ -173,21 +182,44 @@ class ManagedInstance:
                 return InstanceControlResponse(ok=True, message=self.message, term=req.term, state=data)
             if req.command == 'promote':
                 with self.lock:
-                    if req.state:
-                        self.hooks.set_state(state_codec.decode(self.module, req.state))
-                    self.holder.promoted(req.term)
-                    self.frozen = False
-                    self.was_active = False       # the loop reports "active" anew, not a lapse
-                self.message = f'promoted to term {req.term}'
-                rospy.loginfo(f'{self.id}: promoted to term {req.term}'
-                              f'{f" with a state of {len(req.state)} bytes" if req.state else ""}')
-                self._renew()
-                self._status()
-                return InstanceControlResponse(ok=True, message=self.message, term=req.term, state=b'')
+                    again = (req.term == self.holder.term and not self.frozen and not self.holder.superseded)
+                    if not again:
+                        if req.state:
+                            self.hooks.set_state(state_codec.decode(self.module, req.state))
+                        self.holder.promoted(req.term, req.nonce, req.duration)
+                        self.frozen = False
+                        self.was_active = False       # reported as "active" anew, not a lapse
+                if not again:
+                    self.message = f'promoted to term {req.term}'
+                    rospy.loginfo(f'{self.id}: promoted to term {req.term}'
+                                  f'{f" with a state of {len(req.state)} bytes" if req.state else ""}'
+                                  f'{" and a lease" if self.active else ""}')
+                    self._renew()
+                    self._transitions()               # a granted promotion opens the outputs now
+                    self._status()
+                    self.wake.set()
+                return InstanceControlResponse(ok=True, message=self.message, term=req.term, state=b'',
+                                               active=self.active)
             return InstanceControlResponse(ok=False, message=f'unknown command {req.command!r}')
         except (ValueError, KeyError, TypeError) as exc:      # a state that does not fit, a stale promotion
             rospy.logwarn(f'{self.id}: {req.command} refused: {exc}')
             return InstanceControlResponse(ok=False, message=str(exc), term=self.holder.term)
+
+    def _transitions(self) -> None:
+        """Open the outputs when the instance became active (``on_active``), report a lapse when it stopped."""
+        with self.activation:
+            with self.lock:
+                active = self.holder.active(time.monotonic()) and not self.frozen
+                lapsed = not active and not self.frozen and not self.holder.superseded
+            if active and not self.was_active:
+                self.was_active = True
+                rospy.loginfo(f'{self.id}: active (term {self.holder.term})')
+                self.hooks.on_active()
+            elif not active and self.was_active:
+                self.was_active = False
+                if lapsed:
+                    rospy.logwarn(f'{self.id}: lease lapsed (term {self.holder.term}): outputs closed until a '
+                                  f'renewal is granted')
 
     def _loop(self) -> None:
         cfg = self.cfg
@@ -197,24 +229,18 @@ class ManagedInstance:
             now = time.monotonic()
             with self.lock:
                 promoted = self.holder.term > 0 and not self.frozen and not self.holder.superseded
+                standby = self.holder.term == 0 and not self.frozen
                 active = promoted and self.holder.active(now)
                 superseded = self.holder.superseded and not self.frozen
                 role = self._role()
             try:
-                if promoted and now >= next_renew:
+                if (promoted or standby) and now >= next_renew:
                     next_renew = now + cfg.lease.renew_period
                     self._renew()
-                if active and not self.was_active:
-                    self.was_active = True
-                    rospy.loginfo(f'{self.id}: active (term {self.holder.term})')
-                    self.hooks.on_active()
-                elif not active and self.was_active:
-                    self.was_active = False
-                    if not self.frozen and not superseded:
-                        rospy.logwarn(f'{self.id}: lease lapsed (term {self.holder.term}): outputs closed until a '
-                                      f'renewal is granted')
+                self._transitions()
                 if superseded:
                     self.frozen = True
+                    self.frozen_wall = time.time()
                     self.message = 'superseded: a newer term was announced'
                     rospy.logwarn(f'{self.id}: superseded (term {self.holder.term} is over): outputs closed, '
                                   f'shutting down')
@@ -233,7 +259,8 @@ class ManagedInstance:
                 if rospy.core.is_shutdown_requested():
                     return
                 raise
-            time.sleep(min(cfg.lease.renew_period, cfg.replicate_period, cfg.status_period) / 4)
+            self.wake.wait(min(cfg.lease.renew_period, cfg.replicate_period, cfg.status_period) / 4)
+            self.wake.clear()
 
     def _publish_state(self) -> None:
         self.state_seq += 1

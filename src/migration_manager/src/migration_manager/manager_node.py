@@ -19,9 +19,37 @@ from cnr_msgs.msg import AgentHealth, InstanceStatus, MigrationEvent, MigrationL
 from cnr_msgs.srv import AgentCommand, InstanceControl, Migrate, MigrateResponse
 from cnr_params.ros import call_with_timeout, init_node, private_section
 from migration_manager.core.config import from_section
-from migration_manager.core.lease import Answer, Grantor, host_of
+from migration_manager.core.lease import Answer, Grantor, host_of, instance_id
 from migration_manager.core.plan import Migration, Step
 from migration_manager.instance import topic
+
+
+class ControlLink:
+    """Calls to one instance's control service over a persistent connection (one round trip per call instead of
+    a connection set-up each time: the hand-over's freeze and promotion cross the link). A call that fails or
+    overruns ``timeout`` closes the connection; the next call opens a new one (e.g. to a restarted instance).
+    A stale connection (its instance exited) fails at once and is retried once on a fresh one."""
+
+    def __init__(self, name: str, timeout: float) -> None:
+        self.name = name
+        self.timeout = timeout
+        self.lock = threading.Lock()
+        self.proxy: Optional[rospy.ServiceProxy] = None
+
+    def call(self, **request) -> Tuple[bool, object]:
+        with self.lock:
+            for attempt in (1, 2):
+                fresh = self.proxy is None
+                if fresh:
+                    self.proxy = rospy.ServiceProxy(self.name, InstanceControl, persistent=True)
+                started = time.monotonic()
+                ok, res = call_with_timeout(self.proxy, self.timeout, **request)
+                if ok:
+                    return ok, res
+                self.proxy.close()
+                self.proxy = None
+                if fresh or isinstance(res, TimeoutError) or time.monotonic() - started > 1.0:
+                    return ok, res
 
 
 @dataclass
@@ -66,7 +94,7 @@ class Manager:
         self.lease_pubs = {m: rospy.Publisher(topic(m, 'lease'), MigrationLease, queue_size=50) for m in cfg.modules}
         self.event_pub = rospy.Publisher('~events', MigrationEvent, queue_size=100)
         self.placement_pub = rospy.Publisher('~placement', Placement, queue_size=5, latch=True)
-        self.control = {(m, h): rospy.ServiceProxy(topic(m, f'{h}/control'), InstanceControl)
+        self.control = {(m, h): ControlLink(topic(m, f'{h}/control'), cfg.control_call)
                         for m in cfg.modules for h in cfg.hosts}
         self.agents = {h: rospy.ServiceProxy(f'/migration/agents/{h}/command', AgentCommand) for h in cfg.hosts}
         for m in cfg.modules:
@@ -90,6 +118,9 @@ class Manager:
             return
         now = time.monotonic()
         with self.lock:
+            if msg.term == 0:                 # a standby's request: kept for a promotion's pre-grant
+                book.grantor.standby_request(msg.instance, msg.nonce, now)
+                return
             a = book.grantor.request(msg.instance, msg.term, msg.nonce, now)
             if a.granted and msg.term not in book.first_grant:
                 book.first_grant[msg.term] = now
@@ -121,7 +152,7 @@ class Manager:
 
     def _instance_up(self, module: str, host: str) -> bool:
         """The instance answers and is ready (a standby's inputs are connected)."""
-        ok, res = self._call(self.control[(module, host)], 'state', 0, b'')
+        ok, res = self.control[(module, host)].call(command='state')
         return ok and res.ok and res.message != 'not ready'
 
     # ------------------------------------------------------------------ migrations
@@ -215,15 +246,22 @@ class Manager:
             with self.lock:
                 return m.target_failed(time.monotonic(), f'agent on {host}: {res if not ok else res.message}')
         if verb == 'freeze':
-            ok, res = self._call(self.control[(m.module, host)], 'freeze', detail, b'')
+            ok, res = self.control[(m.module, host)].call(command='freeze', term=detail)
             with self.lock:
                 if ok and res.ok:
                     return m.frozen(time.monotonic(), bytes(res.state))
                 return m.source_unreachable(time.monotonic())
         if verb == 'promote':
             term, state = detail
-            ok, res = self._call(self.control[(m.module, host)], 'promote', term, state or b'')
+            book = self.books[m.module]
+            with self.lock:                   # the lease for the target's newest standby request, granted now
+                nonce, duration = book.grantor.pregrant(instance_id(m.module, host), time.monotonic())
+            ok, res = self.control[(m.module, host)].call(command='promote', term=term, state=state or b'',
+                                                          nonce=nonce, duration=duration)
             if ok and res.ok:
+                if res.active:                # active before it answered
+                    with self.lock:
+                        book.first_grant.setdefault(term, time.monotonic())
                 return []
             with self.lock:
                 if host == m.target:

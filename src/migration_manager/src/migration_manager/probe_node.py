@@ -3,10 +3,13 @@
 Records every message of the given topics with its arrival time (wall clock, this host) and the instance that
 published it (the ``cnr_instance`` connection header; '-' for an unmanaged publisher), and optionally calls
 ``/global_goal_manager/next_goal`` at a fixed rate (the global goal manager has no periodic output of its own),
-recording each answer, and move_base's goal results (``/move_base/result``: ok = succeeded, the final status
-code in the instance column). Writes a TSV (``time``, ``topic``, ``instance``, ``ok``) as it goes, flushed per line, so
-a reader sees the gaps: downtime = the gap between the last output of the old instance and the first of the new
-one, measured here, on the consumer's side.
+recording each answer at the time its request was sent (a request sent then was served), and move_base's goal
+results (``/move_base/result``: ok = succeeded, the final status code in the instance column). For the modules in
+``~status_modules`` it also records when each instance closed its outputs for good (topic ``frozen``: the
+frozen status's stamp, the instance's own clock — on the testbed one clock for every host). Writes a TSV
+(``time``, ``topic``, ``instance``, ``ok``) as it goes, flushed per line, so a reader sees the gaps: the consumer's
+gap (last output of the old instance to the first of the new one) and the downtime (the old instance's outputs
+closed to the new one's first output arriving here).
 """
 from __future__ import annotations
 
@@ -18,6 +21,7 @@ from actionlib_msgs.msg import GoalStatus
 from move_base_msgs.msg import MoveBaseActionResult
 
 import cnr_params
+from cnr_msgs.msg import InstanceStatus
 from cnr_msgs.srv import NextGoal
 from cnr_params.ros import call_with_timeout, init_node, private_section
 from migration_manager.instance import INSTANCE_HEADER
@@ -30,6 +34,13 @@ class Probe:
         if not isinstance(topics, list) or not all(isinstance(t, str) and t for t in topics):
             raise p.error('topics', f'must be a list of topic names, got {topics!r}')
         self.rate = p.number('next_goal_rate', nonnegative=True)
+        modules = p.raw('status_modules')
+        if not isinstance(modules, list) or not all(isinstance(m, str) and m for m in modules):
+            raise p.error('status_modules', f'must be a list of module names, got {modules!r}')
+        hosts = p.raw('hosts')
+        if not isinstance(hosts, list) or not all(isinstance(h, str) and h for h in hosts):
+            raise p.error('hosts', f'must be a list of host names, got {hosts!r}')
+        self.frozen_seen = set()
         self.lock = threading.Lock()
         self.out = open(p.string('out'), 'a', buffering=1)
         if self.out.tell() == 0:
@@ -38,12 +49,21 @@ class Probe:
             rospy.Subscriber(t, rospy.AnyMsg, self._on_msg, callback_args=t, queue_size=200)
         # move_base's results: ok = SUCCEEDED, the instance column holds the final status
         rospy.Subscriber('/move_base/result', MoveBaseActionResult, self._on_result, queue_size=20)
+        for m in modules:
+            for h in hosts:
+                rospy.Subscriber(f'/migration/{m}/{h}/status', InstanceStatus, self._on_status, queue_size=20)
         self.next_goal = rospy.ServiceProxy('/global_goal_manager/next_goal', NextGoal)
         self.last_instance = ''
 
-    def _write(self, topic: str, instance: str, ok: bool) -> None:
+    def _write(self, topic: str, instance: str, ok: bool, at: float = 0.0) -> None:
         with self.lock:
-            self.out.write(f'{time.time():.6f}\t{topic}\t{instance}\t{int(ok)}\n')
+            self.out.write(f'{at or time.time():.6f}\t{topic}\t{instance}\t{int(ok)}\n')
+
+    def _on_status(self, msg: InstanceStatus) -> None:
+        key = (msg.instance, msg.pid, msg.term)
+        if msg.role == 'frozen' and key not in self.frozen_seen:
+            self.frozen_seen.add(key)
+            self._write('frozen', msg.instance, True, msg.header.stamp.to_sec())
 
     def _on_msg(self, msg: rospy.AnyMsg, topic: str) -> None:
         self._write(topic, msg._connection_header.get(INSTANCE_HEADER, '-'), True)
@@ -58,9 +78,10 @@ class Probe:
         period = 1.0 / self.rate
         next_call = time.monotonic()
         while not rospy.core.is_shutdown_requested():
+            sent = time.time()
             done, res = call_with_timeout(self.next_goal, 1.0, 0.0, 0.0)
             ok = done and res.success
-            self._write('next_goal', '', ok)
+            self._write('next_goal', '', ok, sent)
             next_call = max(next_call + period, time.monotonic())
             time.sleep(max(0.0, next_call - time.monotonic()))
 

@@ -1,16 +1,26 @@
 """Analysis for bench_migration (ROS-free): the consumer-side downtime of a migration from a
 migration_probe TSV, and the table of the results.
 
-Downtime (the issue's definition): from the last output of the old instance to the first output of the new
-one, measured where the output is consumed. For a module whose output carries its instance (the
-``cnr_instance`` connection header: local_mapcell_manager's mapcell_measurements, mfg's activity, move_base's
-cmd_vel) that is exact; for the global goal manager, whose only output is its service's answers, it is the
-longest gap between successful answers around the migration (the bench's probe asks 10 times a second).
+Two measures of a hand-over, both where the output is consumed:
+
+- **consumer gap** (the issue's wording): from the last output of the old instance to the first output of the
+  new one. It holds the module's own output period too: a stream published once a second (mfg's activity) or
+  only when input arrives (local_mapcell_manager's store output, ≈ 3 Hz) shows that gap even when nothing
+  moves.
+- **downtime**: from the moment the old instance closed its outputs for good (its frozen status's stamp) to the
+  first output of the new one arriving at the consumer: the time during which no instance could produce output.
+  The two stamps come from different hosts; on the testbed they share one clock (network namespaces of one
+  kernel), so the difference is exact there.
+
+For a module whose output carries its instance (the ``cnr_instance`` connection header: local_mapcell_manager's
+mapcell_measurements, mfg's activity, move_base's cmd_vel) the new instance's first output is exact; for the
+global goal manager, whose only output is its service's answers, it is the first successful answer (by the time
+its request was sent: the probe asks 10 times a second), and the gap is the longest between successful answers.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 
 import numpy as np
@@ -97,6 +107,29 @@ def handover_gap(rows: Sequence[ProbeRow], module: str, source: str, target: str
     return first_new - last_old
 
 
+def handover_downtime(rows: Sequence[ProbeRow], module: str, source: str, target: str, t0: float,
+                      t1: float) -> Optional[float]:
+    """The downtime of one migration ordered at ``t0`` and answered at ``t1`` (wall s): the old instance's outputs
+    closed (its ``frozen`` row) to the new instance's first output at the consumer. None if it cannot be told (the
+    old instance was not frozen: a failover; no output from the new one within 10 s; move_base's goal ended in
+    between)."""
+    topic = OUTPUT_TOPIC[module]
+    frozen = next((r.time for r in rows if r.topic == 'frozen' and r.instance == f'{module}@{source}'
+                   and t0 - 1.0 <= r.time <= t1 + 1.0), None)
+    if frozen is None:
+        return None
+    window = [r for r in rows if r.topic == topic and frozen <= r.time <= t1 + 10.0]
+    if topic == 'next_goal':
+        first_new = next((r.time for r in window if r.ok), None)
+    else:
+        first_new = next((r.time for r in window if r.instance == f'{module}@{target}'), None)
+    if first_new is None:
+        return None
+    if module == 'move_base' and any(r.topic == '/move_base/result' and frozen <= r.time <= first_new for r in rows):
+        return None
+    return first_new - frozen
+
+
 def stray_outputs(rows: Sequence[ProbeRow], module: str, source: str, target: str, t0: float, t1: float) -> int:
     """Outputs of the old instance received after the new one's first output (within 10 s after ``t1``): more
     than 0 means both were producing at once (never expected; messages already in flight excepted)."""
@@ -121,12 +154,18 @@ class Group:
     gaps: List[float]
     manager: List[float]
     outcomes: Dict[str, int]
+    downtimes: List[float] = field(default_factory=list)
+
+    HEADER = ('done', 'downtime p50', 'downtime p95', 'downtime max', 'gaps', 'gap p50', 'gap p95', 'gap max',
+              'manager p50', 'manager p95')
 
     def row(self) -> List[str]:
         def ms(x: float) -> str:
             return '–' if not math.isfinite(x) else f'{1000 * x:.0f}'
         n_ok = self.outcomes.get('done', 0)
-        return [*map(str, self.key), f'{n_ok}/{sum(self.outcomes.values())}', str(len(self.gaps)),
+        return [*map(str, self.key), f'{n_ok}/{sum(self.outcomes.values())}',
+                ms(percentile(self.downtimes, 50)), ms(percentile(self.downtimes, 95)),
+                ms(max(self.downtimes, default=math.nan)), str(len(self.gaps)),
                 ms(percentile(self.gaps, 50)), ms(percentile(self.gaps, 95)), ms(max(self.gaps, default=math.nan)),
                 ms(percentile(self.manager, 50)), ms(percentile(self.manager, 95))]
 
@@ -138,7 +177,8 @@ def group_results(results: Sequence[Dict[str, str]], keys: Sequence[str]) -> Lis
         g = groups.setdefault(key, Group(key, [], [], {}))
         g.outcomes[r['outcome']] = g.outcomes.get(r['outcome'], 0) + 1
         if r['outcome'] == 'done':
-            for value, into in ((r['consumer_gap'], g.gaps), (r['manager_downtime'], g.manager)):
+            for value, into in ((r['consumer_gap'], g.gaps), (r['manager_downtime'], g.manager),
+                                (r.get('downtime', ''), g.downtimes)):
                 if value not in ('', 'nan', 'None'):
                     into.append(float(value))
     return [groups[k] for k in sorted(groups, key=lambda k: tuple(float(x) if x.replace('.', '').isdigit() else x

@@ -13,9 +13,15 @@ for the current term:
 - The grantor records ``valid_until = grant time + duration`` on its own clock. It gives the module to another
   instance only when (a) the holder has confirmed it stopped (``release``: frozen for a planned migration), or
   (b) ``valid_until + margin`` has passed (the holder is cut off and has demoted itself by then).
-- A promoted instance produces no output before its first renewal for the new term is answered; the grantor
-  answers renewals only for the current term and holder. A promotion that the grantor later rolled back can
-  therefore never produce output, even if the order reaches the instance late.
+- A promoted instance produces no output before it holds a lease for the new term; the grantor answers renewals
+  only for the current term and holder. A promotion may carry the lease itself (:meth:`Grantor.pregrant`): a
+  standby sends requests too (term 0, never answered), and the promotion grants the newest one the grantor has
+  received. The instance is then active the moment the order arrives, valid until *that request's* send time +
+  ``duration`` (so still no later than the grantor believes: the request was sent before the grantor received it,
+  which was before the promotion), without a round trip for its first renewal. The grantor counts such a lease
+  as granted at the promotion: a promotion it rolls back is waited out (``free_at``) like any lease. A promotion
+  without a pre-grant that the grantor later rolled back can never produce output, even if the order reaches the
+  instance late.
 
 ``margin`` covers clock *rate* differences (monotonic clocks drift by ppm) and the time the holder needs to stop
 its outputs once its lease ends. These classes hold no ROS types and read no clock: callers pass ``now``
@@ -23,8 +29,9 @@ its outputs once its lease ends. These classes hold no ROS types and read no clo
 """
 from __future__ import annotations
 
+import random
 from dataclasses import dataclass, field
-from typing import Dict, Optional
+from typing import Dict, Optional, Tuple
 
 
 def instance_id(module: str, host: str) -> str:
@@ -59,6 +66,7 @@ class Grantor:
         self.term = term
         self.holder = ''
         self.valid_until = float('-inf')     # grantor clock: the last holder may be active until then
+        self.standby: Dict[str, Tuple[int, float]] = {}     # instance -> (nonce, receipt) of its newest request
 
     def free_at(self) -> float:
         """When another instance may be promoted: once every lease granted so far has run out (+ margin)."""
@@ -94,6 +102,20 @@ class Grantor:
             self.holder = ''
             self.term += 1
 
+    def standby_request(self, instance: str, nonce: int, now: float) -> None:
+        """A standby's request (term 0): not answered, remembered for a promotion's pre-grant."""
+        self.standby[instance] = (nonce, now)
+
+    def pregrant(self, instance: str, now: float) -> Tuple[int, float]:
+        """For a promotion of ``instance`` (the holder, just promoted) sent now: the nonce of its newest standby
+        request received within a lease ``duration`` (0: none) and the duration. The lease counts as granted now
+        (``valid_until``), so a rollback waits for it to run out."""
+        nonce, received = self.standby.pop(instance, (0, float('-inf')))
+        if instance != self.holder or not nonce or now - received >= self.duration:
+            return 0, self.duration
+        self.valid_until = max(self.valid_until, now + self.duration)
+        return nonce, self.duration
+
     def request(self, instance: str, term: int, nonce: int, now: float) -> Answer:
         """A renewal request from ``instance`` for ``term``: granted only to the current holder and term."""
         granted = bool(self.holder) and instance == self.holder and term == self.term
@@ -112,30 +134,35 @@ class Holder:
     instance: str
     term: int = 0               # the term it was promoted to (0: standby, never active)
     valid_until: float = float('-inf')
-    next_nonce: int = 1
+    # nonces start at random: a restarted instance (same name) cannot be granted a lease for an earlier process's
+    # request it sent at another time
+    next_nonce: int = field(default_factory=lambda: random.randrange(1, 2 ** 31))
     sent: Dict[int, float] = field(default_factory=dict)    # nonce -> local send time
     superseded: bool = False    # a newer term or another holder was announced: this instance is done
     seen: int = 0               # the highest term announced so far (a promotion must not be older)
     seen_holder: str = ''       # the holder announced with it
     heard: bool = False         # an announcement or answer of the module's grantor has arrived (``seen`` is known)
 
-    def promoted(self, term: int) -> None:
-        """Promotion to ``term``: output waits for the first granted renewal."""
+    def promoted(self, term: int, nonce: int = 0, duration: float = 0.0) -> None:
+        """Promotion to ``term``: active at once if it carries a grant (``nonce``: one of the standby requests
+        this instance sent, valid until that request's send time + ``duration``), else from the first granted
+        renewal."""
         if term <= self.term or term < self.seen or (term == self.seen and self.seen_holder != self.instance):
             raise ValueError(f'{self.instance}: promotion to term {term}, but term {max(self.term, self.seen)} '
                              f'was already seen')
+        t0 = self.sent.get(nonce) if nonce else None
         self.term = term
-        self.valid_until = float('-inf')
+        self.valid_until = float('-inf') if t0 is None else t0 + duration
         self.sent.clear()
         self.superseded = False
 
     def request(self, now: float) -> int:
         """A renewal request is sent now: returns its nonce (only the last few are remembered)."""
         nonce = self.next_nonce
-        self.next_nonce += 1
+        self.next_nonce = self.next_nonce % (2 ** 32 - 1) + 1
         self.sent[nonce] = now
-        for old in [n for n in self.sent if n < nonce - 64]:
-            del self.sent[old]
+        while len(self.sent) > 64:                 # the oldest first (insertion order)
+            del self.sent[next(iter(self.sent))]
         return nonce
 
     def on_answer(self, a: Answer) -> None:
