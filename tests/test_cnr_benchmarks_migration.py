@@ -68,3 +68,18 @@ def test_output_flowing_and_period(tmp_path):
     assert output_flowing(r, 'local_mapcell_manager', r[-1].time + 0.2, 0.5)
     assert not output_flowing(r, 'local_mapcell_manager', r[-1].time + 1.0, 0.5)
     assert math.isclose(output_period(read_probe(str(path)), 'local_mapcell_manager'), 1 / 3, rel_tol=1e-3)
+
+
+def test_a_store_s_downtime_is_the_longest_a_measurement_waited_for_it_across_the_hand_over():
+    m, out = '/merged_measurements', '/mapcell_measurements'
+    old, new = 'local_mapcell_manager@robot', 'local_mapcell_manager@cloud'
+    base = [ProbeRow(9.0, m, '-', True, 100.0), ProbeRow(9.01, out, old, True, 100.0),
+            ProbeRow(9.5, 'frozen', old, True)]
+    # a measurement arrives during the hand-over and is stored by the new instance 0.2 s later
+    waited = base + [ProbeRow(9.6, m, '-', True, 100.3), ProbeRow(9.8, out, new, True, 100.3 + 1e-9),
+                     ProbeRow(10.0, m, '-', True, 100.6), ProbeRow(10.01, out, new, True, 100.6)]
+    assert math.isclose(handover_downtime(waited, 'local_mapcell_manager', 'robot', 'cloud', 9.4, 9.9), 0.2)
+    # none arrives until the new instance is active: the store was never waited for
+    idle = base + [ProbeRow(10.0, m, '-', True, 100.6), ProbeRow(10.01, out, new, True, 100.6)]
+    assert math.isclose(handover_downtime(idle, 'local_mapcell_manager', 'robot', 'cloud', 9.4, 9.9), 0.01)
+    assert math.isclose(handover_gap(idle, 'local_mapcell_manager', 'robot', 'cloud', 9.4, 9.9), 1.0)

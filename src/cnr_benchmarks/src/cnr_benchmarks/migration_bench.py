@@ -114,7 +114,7 @@ class Bench:
             raise RuntimeError(f'the modules did not come up (see {self.out}/mission.log and the report logs)')
         self.robot.call('setParam', '/migration_probe', dict(
             topics=sorted({t for m, t in OUTPUT_TOPIC.items() if t.startswith('/')} | {'/merged_measurements'}),
-            next_goal_rate=10.0, status_modules=list(OUTPUT_TOPIC), hosts=['robot', 'cloud'], out=self.probe_file))
+            next_goal_rate=20.0, status_modules=list(OUTPUT_TOPIC), hosts=['robot', 'cloud'], out=self.probe_file))
         self.robot.run(['rosrun', 'migration_manager', 'migration_probe'], 'probe')
         report.progress('all modules active on the robot; probe running')
 

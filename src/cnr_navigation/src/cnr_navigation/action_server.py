@@ -27,7 +27,19 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
 
     def __init__(self, name: str, action_spec, execute_cb) -> None:
         self._adopted: Optional[ServerGoalHandle] = None
+        self._prepared = False
         super().__init__(name, action_spec, execute_cb=execute_cb, auto_start=False)
+
+    def prepare(self) -> None:
+        """Create the action's publishers, subscribers and status timer now, without starting the server: a
+        standby does this ahead of its promotion (their registrations with the master and the connections take
+        ≈ 1 s on the capped robot). Until :meth:`start_with`, goals and cancels are ignored and no status goes out
+        (actionlib's ``started`` flag). Once only: a server started again after :meth:`release` keeps them."""
+        a = self.action_server
+        with a.lock, self.lock:
+            if not self._prepared:
+                a.initialize()
+                self._prepared = True
 
     @property
     def started(self) -> bool:
@@ -48,8 +60,10 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
         with a.lock, self.lock:
             if a.started:
                 return
-            a.initialize()          # publishers, subscribers, status timer: nothing is published before
-            a.started = True        # the publish_status() below
+            if not self._prepared:  # publishers, subscribers, status timer: nothing is published before
+                a.initialize()      # the publish_status() below
+                self._prepared = True
+            a.started = True
             for action_goal, status, cancel in goals:
                 a.internal_goal_callback(action_goal)
                 handle = self.next_goal

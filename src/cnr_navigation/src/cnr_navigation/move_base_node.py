@@ -143,6 +143,8 @@ class MoveBaseNode(Hooks):
         self.local_plan_pub = pub('~DWAPlannerROS/local_plan', Path, queue_size=1)
         for cm in (self.global_costmap, self.local_costmap):
             cm.open_publishers(pub)
+        if self.instance.managed:
+            self.server.prepare()          # a standby's action server waits, connected, for its promotion
         self.ready.set()
         if not self.instance.managed:
             self._open_outputs()

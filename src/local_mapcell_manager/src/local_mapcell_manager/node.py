@@ -156,15 +156,15 @@ class ManagerNode(Hooks):
             rospy.loginfo(f'{"promoted without a state" if self.instance.managed else "started"}: {own} '
                           f'measurements of its own; {self._recovered(since, recovered, added)}'
                           f'{self._replayed(replay)}')
-        if not self.services:
+        with self.instance.lock:                        # the waiting measurements first: the hand-over's
+            with self.lock:                             # output gap ends here
+                self._flush()
+            self._publish(force=True)
+        if not self.services:                           # registrations with the master take a while
             self.services = [
                 rospy.Service('~get_cell', GetCell, self._get_cell),
                 rospy.Service('~get_cell_states', GetCellStates, self._get_cell_states),
                 rospy.Service('~get_measurements', GetMeasurements, self._get_measurements)]
-        with self.instance.lock:
-            with self.lock:
-                self._flush()
-            self._publish(force=True)
 
     def on_frozen(self) -> None:
         with self.instance.lock, self.lock:

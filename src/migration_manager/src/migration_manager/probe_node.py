@@ -7,14 +7,18 @@ recording each answer at the time its request was sent (a request sent then was 
 results (``/move_base/result``: ok = succeeded, the final status code in the instance column). For the modules in
 ``~status_modules`` it also records when each instance closed its outputs for good (topic ``frozen``: the
 frozen status's stamp, the instance's own clock — on the testbed one clock for every host). Writes a TSV
-(``time``, ``topic``, ``instance``, ``ok``) as it goes, flushed per line, so a reader sees the gaps: the consumer's
-gap (last output of the old instance to the first of the new one) and the downtime (the old instance's outputs
-closed to the new one's first output arriving here).
+(``time``, ``topic``, ``instance``, ``ok``, ``stamp``: the message's header stamp for a type with a header, so an
+output can be matched with the input it carries) as it goes, flushed per line, so a reader sees the gaps: the
+consumer's gap (last output of the old instance to the first of the new one) and the downtime (the old
+instance's outputs closed to the new one's first output arriving here; for a store, how long a measurement
+waited for one).
 """
 from __future__ import annotations
 
+import struct
 import threading
 import time
+from typing import Dict
 
 import rospy
 from actionlib_msgs.msg import GoalStatus
@@ -44,7 +48,8 @@ class Probe:
         self.lock = threading.Lock()
         self.out = open(p.string('out'), 'a', buffering=1)
         if self.out.tell() == 0:
-            self.out.write('time\ttopic\tinstance\tok\n')
+            self.out.write('time\ttopic\tinstance\tok\tstamp\n')
+        self.stamped: Dict[str, bool] = {}         # message type -> its first field is a std_msgs/Header
         for t in topics:
             rospy.Subscriber(t, rospy.AnyMsg, self._on_msg, callback_args=t, queue_size=200)
         # move_base's results: ok = SUCCEEDED, the instance column holds the final status
@@ -55,9 +60,21 @@ class Probe:
         self.next_goal = rospy.ServiceProxy('/global_goal_manager/next_goal', NextGoal)
         self.last_instance = ''
 
-    def _write(self, topic: str, instance: str, ok: bool, at: float = 0.0) -> None:
+    def _write(self, topic: str, instance: str, ok: bool, at: float = 0.0, stamp: str = '') -> None:
         with self.lock:
-            self.out.write(f'{at or time.time():.6f}\t{topic}\t{instance}\t{int(ok)}\n')
+            self.out.write(f'{at or time.time():.6f}\t{topic}\t{instance}\t{int(ok)}\t{stamp}\n')
+
+    def _stamp(self, msg: rospy.AnyMsg) -> str:
+        """The header stamp of a serialized message whose type starts with a Header ('' otherwise)."""
+        kind = msg._connection_header.get('type', '')
+        if kind not in self.stamped:
+            from roslib.message import get_message_class
+            cls = get_message_class(kind)
+            self.stamped[kind] = bool(cls is not None and cls._slot_types[:1] == ['std_msgs/Header'])
+        if not self.stamped[kind] or len(msg._buff) < 12:
+            return ''
+        _seq, secs, nsecs = struct.unpack_from('<III', msg._buff)
+        return f'{secs}.{nsecs:09d}'
 
     def _on_status(self, msg: InstanceStatus) -> None:
         key = (msg.instance, msg.pid, msg.term)
@@ -66,7 +83,7 @@ class Probe:
             self._write('frozen', msg.instance, True, msg.header.stamp.to_sec())
 
     def _on_msg(self, msg: rospy.AnyMsg, topic: str) -> None:
-        self._write(topic, msg._connection_header.get(INSTANCE_HEADER, '-'), True)
+        self._write(topic, msg._connection_header.get(INSTANCE_HEADER, '-'), True, stamp=self._stamp(msg))
 
     def _on_result(self, msg: MoveBaseActionResult) -> None:
         self._write('/move_base/result', str(msg.status.status), msg.status.status == GoalStatus.SUCCEEDED)

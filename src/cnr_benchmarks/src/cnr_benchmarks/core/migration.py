@@ -10,12 +10,15 @@ Two measures of a hand-over, both where the output is consumed:
 - **downtime**: from the moment the old instance closed its outputs for good (its frozen status's stamp) to the
   first output of the new one arriving at the consumer: the time during which no instance could produce output.
   The two stamps come from different hosts; on the testbed they share one clock (network namespaces of one
-  kernel), so the difference is exact there.
+  kernel), so the difference is exact there. For the store (local_mapcell_manager), whose output is its input
+  stored, it is the longest a measurement waited for a store across the hand-over: from its arrival on
+  ``/merged_measurements`` to its arrival, stored by the new instance, on ``/mapcell_measurements`` (matched by
+  header stamp; a store waiting for input is not down).
 
 For a module whose output carries its instance (the ``cnr_instance`` connection header: local_mapcell_manager's
 mapcell_measurements, mfg's activity, move_base's cmd_vel) the new instance's first output is exact; for the
 global goal manager, whose only output is its service's answers, it is the first successful answer (by the time
-its request was sent: the probe asks 10 times a second), and the gap is the longest between successful answers.
+its request was sent: the probe asks 20 times a second), and the gap is the longest between successful answers.
 """
 from __future__ import annotations
 
@@ -34,12 +37,16 @@ OUTPUT_TOPIC = {
 }
 
 
+INPUT_TOPIC = {'local_mapcell_manager': '/merged_measurements'}     # output = this input, stored
+
+
 @dataclass(frozen=True)
 class ProbeRow:
     time: float
     topic: str
     instance: str
     ok: bool
+    stamp: float = math.nan        # the message's header stamp (types with a header)
 
 
 def read_probe(path: str, tail_bytes: int = 0) -> List[ProbeRow]:
@@ -55,9 +62,10 @@ def read_probe(path: str, tail_bytes: int = 0) -> List[ProbeRow]:
     rows = []
     for line in lines:
         parts = line.split('\t')
-        if len(parts) == 4:
+        if len(parts) in (4, 5):
             try:
-                rows.append(ProbeRow(float(parts[0]), parts[1], parts[2], parts[3] == '1'))
+                stamp = float(parts[4]) if len(parts) == 5 and parts[4] else math.nan
+                rows.append(ProbeRow(float(parts[0]), parts[1], parts[2], parts[3] == '1', stamp))
             except ValueError:
                 continue                             # a line being written
     return rows
@@ -127,7 +135,31 @@ def handover_downtime(rows: Sequence[ProbeRow], module: str, source: str, target
         return None
     if module == 'move_base' and any(r.topic == '/move_base/result' and frozen <= r.time <= first_new for r in rows):
         return None
+    if module in INPUT_TOPIC:
+        return input_wait(rows, module, target, frozen, first_new, t1)
     return first_new - frozen
+
+
+def _key(stamp: float) -> int:
+    return round(stamp * 1e5)          # a stamp through float seconds and back may move by a nanosecond
+
+
+def input_wait(rows: Sequence[ProbeRow], module: str, target: str, frozen: float, first_new: float,
+               t1: float) -> Optional[float]:
+    """The longest an input waited for its output across a hand-over: among the new instance's outputs whose
+    input arrived before its first output (they waited through the hand-over; the first one itself included),
+    the largest output arrival - input arrival. None without stamps (a probe file from before they were
+    recorded)."""
+    arrived = {_key(r.stamp): r.time for r in rows if r.topic == INPUT_TOPIC[module] and math.isfinite(r.stamp)
+               and frozen - 1.0 <= r.time <= t1 + 10.0}
+    waits = []
+    for r in rows:
+        if (r.topic == OUTPUT_TOPIC[module] and r.instance == f'{module}@{target}' and first_new <= r.time <= t1 + 10.0
+                and math.isfinite(r.stamp) and _key(r.stamp) in arrived):
+            t_in = arrived[_key(r.stamp)]
+            if t_in <= first_new or r.time == first_new:
+                waits.append(r.time - t_in)
+    return max(waits) if waits else None
 
 
 def stray_outputs(rows: Sequence[ProbeRow], module: str, source: str, target: str, t0: float, t1: float) -> int:
