@@ -34,7 +34,8 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
         """Create the action's publishers, subscribers and status timer now, without starting the server: a
         standby does this ahead of its promotion (their registrations with the master and the connections take
         ≈ 1 s on the capped robot). Until :meth:`start_with`, goals and cancels are ignored and no status goes out
-        (actionlib's ``started`` flag). Once only: a server started again after :meth:`release` keeps them."""
+        (actionlib's ``started`` flag). :meth:`release` unregisters them (actionlib's ``stop``); a server started
+        again after it creates them anew."""
         a = self.action_server
         with a.lock, self.lock:
             if not self._prepared:
@@ -99,7 +100,8 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
         a = self.action_server
         with a.lock, self.lock:
             if a.started:
-                a.stop()
+                a.stop()                # unregisters the publishers and subscribers: prepared anew when started
+                self._prepared = False
             a.status_list = []
             self.current_goal = ServerGoalHandle()
             self.next_goal = ServerGoalHandle()

@@ -156,17 +156,20 @@ class Manager:
         return ok and res.ok and res.message != 'not ready'
 
     # ------------------------------------------------------------------ migrations
-    def _event(self, mid: int, m: Migration, message: str) -> None:
+    def _event(self, mid: int, m: Migration, message: str, at: Optional[float] = None) -> None:
+        """Publish and log one event; ``at`` (monotonic) is when it happened (the stamp; default now): events
+        are published after the actions that made them, which may cross the link."""
         ev = MigrationEvent(id=mid, module=m.module, source=m.source, target=m.target, mode=m.mode,
                             step=m.step.value, message=message, term=m.term,
                             downtime=m.downtime if m.step is Step.DONE and m.downtime is not None else math.nan)
-        ev.header.stamp = rospy.Time.from_sec(time.time())
+        ev.header.stamp = rospy.Time.from_sec(time.time() - (0.0 if at is None else time.monotonic() - at))
         try:
             self.event_pub.publish(ev)
         except rospy.ROSException:
             if not rospy.core.is_shutdown_requested():
                 raise
-        rospy.loginfo(f'migration {mid} {m.module} {m.source or "-"}->{m.target} ({m.mode}): {message}')
+        since = f' [+{1000 * (at - m.started):.0f} ms]' if at is not None else ''
+        rospy.loginfo(f'migration {mid} {m.module} {m.source or "-"}->{m.target} ({m.mode}){since}: {message}')
 
     def run_migration(self, module: str, target: str, mode: str, failover: bool = False) -> Tuple[int, Migration]:
         """Carry out one migration to its end (blocking); returns its number and its final state."""
@@ -193,7 +196,7 @@ class Manager:
                     actions += self._do(run, verb, host, detail)
                 with self.lock:
                     for ev in m.events[seen:]:
-                        self._event(mid, m, ev.message)
+                        self._event(mid, m, ev.message, ev.at)
                     seen = len(m.events)
                     if m.finished:
                         break
