@@ -13,7 +13,8 @@ from cnr_navigation.core.move_base import MoveBaseConfig, MoveBaseCore, NavState
 from cnr_navigation.core.recovery import Recovery, StepResult
 from migration_manager.core import state as codec
 
-GOAL = GoalRecord('/mfg-3-12.500', 1712, 500_000_000, 'map', 4.0, 0.4, 0.5, False, 2, 'CONTROLLING_R')
+GOAL = GoalRecord('/mfg-3-12.500', 1712, 500_000_000, 'map', 4.0, 0.4, 0.5, False, 2, 'CONTROLLING_R',
+                  ((0.0, 0.0, 0.0), (2.0, 0.2, 0.1), (4.0, 0.4, 0.5)))
 NEXT = GoalRecord('/mfg-4-13.000', 1713, 0, 'base_link', 1.0, -0.5, -1.0, True)
 
 
@@ -26,8 +27,12 @@ def test_round_trip_through_the_migration_codec():
     back = parse_state(codec.decode('move_base', data), recoveries=4)
     assert back == HandOver(GOAL, NEXT)
     assert back.goal.recovery_index == 2 and back.goal.recovery_trigger == 'CONTROLLING_R'
-    # a pending goal carries no recovery state of its own
-    assert 'recovery_index' not in good_state()['next_goal']
+    assert back.goal.plan == GOAL.plan
+    # a pending goal carries no recovery state or plan of its own
+    assert 'recovery_index' not in good_state()['next_goal'] and 'plan' not in good_state()['next_goal']
+    older = good_state()
+    del older['goal']['plan']                                     # an instance from before plans were handed over
+    assert parse_state(older, 4).goal.plan == ()
 
 
 def test_no_goal_is_a_valid_state_and_nan_targets_are_kept():
@@ -53,6 +58,9 @@ def test_no_goal_is_a_valid_state_and_nan_targets_are_kept():
     (lambda s: s['goal'].update(recovery_index=5), 'goal.recovery_index'),
     (lambda s: s['goal'].update(recovery_index=-1), 'goal.recovery_index'),
     (lambda s: s['goal'].update(recovery_trigger='STUCK_R'), 'goal.recovery_trigger'),
+    (lambda s: s['goal'].update(plan={'x': 1}), 'goal.plan must be a list'),
+    (lambda s: s['goal']['plan'].append([1.0, 2.0]), 'goal.plan[3]'),
+    (lambda s: s['goal']['plan'].insert(0, [1.0, math.nan, 0.0]), 'goal.plan[0]'),
     (lambda s: s['next_goal'].pop('y'), 'next_goal.y'),
     (lambda s: s['next_goal'].update(id=GOAL.id), 'next_goal.id'),
 ])
@@ -159,3 +167,36 @@ def test_a_pause_does_not_count_against_the_patience(resume, state):
         c.resume(100.0)            # the control loop was paused (lease lapsed) until t = 100 s
     c.cycle(100.0)
     assert c.state == state
+
+
+class Driving(Backend):
+    """A robot that follows any plan it is given."""
+
+    def __init__(self):
+        self.plans = []
+
+    def set_plan(self, plan):
+        self.plans.append(np.asarray(plan))
+        return True
+
+    def compute_velocity(self):
+        return (0.2, 0.0)
+
+
+@pytest.mark.parametrize('planner_frequency', [0.0, 1.0])
+def test_a_goal_taken_over_with_its_plan_is_controlled_at_once(planner_frequency):
+    backend = Driving()
+    c = core()
+    c.cfg.planner_frequency = planner_frequency
+    c.backend, c.sync_planner = backend, False
+    assert c.new_goal(4.0, 0.4, yaw_to_quaternion(0.5), now=10.0) is None
+    assert c.cycle(10.0).cmd is None                               # without a plan: planning first
+    c.restore_plan(np.array(GOAL.plan), now=10.0)
+    result = c.cycle(10.01)
+    assert result.cmd == (0.2, 0.0) and c.state is NavState.CONTROLLING
+    assert np.allclose(backend.plans[-1], GOAL.plan)
+    assert not c.planner_due(10.5)                                  # replanned as after a plan of its own
+    assert c.planner_due(11.0) == (planner_frequency > 0)
+    np.testing.assert_allclose(c.controlled_plan(), GOAL.plan)
+    c.reset()
+    assert c.controlled_plan() is None

@@ -82,7 +82,7 @@ class MoveBaseNode(Hooks):
         self.outputs_open = False                # action server, services and topics open (active, not frozen)
         self.open_lock = threading.Lock()        # opening vs. closing the outputs
         self.handover: Optional[HandOver] = None             # set_state's goals, taken over when outputs open
-        self.takeover_recovery: Dict[str, Tuple[int, str]] = {}   # goal id -> recovery state handed over
+        self.takeover_recovery: Dict[str, Tuple[int, str, tuple]] = {}   # goal id -> recovery state, plan
         # (goal id, target in the global frame, next recovery index, trigger) of the goal the state machine
         # pursues; replaced whole, so get_state reads it without the state machine's lock
         self.pursuit: Optional[Tuple[str, Pose2D, int, str]] = None
@@ -250,21 +250,23 @@ class MoveBaseNode(Hooks):
                 gid = current.get_goal_id()
                 if pursuit is not None and pursuit[0] == gid.id:
                     _, target, index, trigger = pursuit
+                    plan = self.core.controlled_plan()
                     goal = GoalRecord(gid.id, gid.stamp.secs, gid.stamp.nsecs, self.global_frame, target.x,
-                                      target.y, target.yaw, self._cancel_requested(current), index, trigger)
+                                      target.y, target.yaw, self._cancel_requested(current), index, trigger,
+                                      () if plan is None else tuple(map(tuple, plan.tolist())))
                 else:                                      # accepted, not started (or just finished) here
-                    goal = self._record(current, *self.takeover_recovery.get(gid.id, (0, 'PLANNING_R')))
+                    goal = self._record(current, *self.takeover_recovery.get(gid.id, (0, 'PLANNING_R', ())))
             if pending is not None:
                 next_goal = self._record(pending, 0, 'PLANNING_R')
             return HandOver(goal, next_goal)
 
-    def _record(self, handle, recovery_index: int, recovery_trigger: str) -> GoalRecord:
+    def _record(self, handle, recovery_index: int, recovery_trigger: str, plan=()) -> GoalRecord:
         """A goal as the client sent it (its own frame)."""
         gid, target = handle.get_goal_id(), handle.get_goal().target_pose
         p, q = target.pose.position, target.pose.orientation
         return GoalRecord(gid.id, gid.stamp.secs, gid.stamp.nsecs, target.header.frame_id.lstrip('/') or
                           self.global_frame, p.x, p.y, target_yaw((q.x, q.y, q.z, q.w)),
-                          self._cancel_requested(handle), recovery_index, recovery_trigger)
+                          self._cancel_requested(handle), recovery_index, recovery_trigger, tuple(plan))
 
     def _note_pursuit(self, goal_id: Optional[str]) -> None:
         """Record the goal the state machine pursues (None: none) with its recovery state."""
@@ -322,7 +324,7 @@ class MoveBaseNode(Hooks):
                 goals: List[Tuple[MoveBaseActionGoal, str, bool]] = []
                 if handover.goal is not None:
                     g = handover.goal
-                    self.takeover_recovery[g.id] = (g.recovery_index, g.recovery_trigger)
+                    self.takeover_recovery[g.id] = (g.recovery_index, g.recovery_trigger, g.plan)
                     goals.append((self._action_goal(g), 'active', g.cancel_requested))
                 if handover.next_goal is not None:
                     goals.append((self._action_goal(handover.next_goal), 'pending',
@@ -417,7 +419,9 @@ class MoveBaseNode(Hooks):
         p, q = goal.pose.position, goal.pose.orientation
         outcome = self.core.new_goal(p.x, p.y, (q.x, q.y, q.z, q.w), rospy.get_time(), z=p.z)
         if outcome is None and takeover is not None:
-            self.core.restore_recovery(*takeover)
+            self.core.restore_recovery(takeover[0], takeover[1])
+            if takeover[2]:                    # it was being controlled: along its plan, without planning first
+                self.core.restore_plan(np.array(takeover[2]), rospy.get_time())
         self._note_pursuit(goal_id if outcome is None else None)
         if outcome is not None:
             self._conclude(self.server.set_aborted, text=outcome.text)
@@ -430,7 +434,8 @@ class MoveBaseNode(Hooks):
             rospy.loginfo(f'move_base: new goal ({p.x:.2f}, {p.y:.2f}) in {self.global_frame}')
         else:
             rospy.loginfo(f'move_base: continuing goal {goal_id} ({p.x:.2f}, {p.y:.2f}) in {self.global_frame}, '
-                          f'taken over from the previous instance (next recovery {takeover[0]}, {takeover[1]})')
+                          f'taken over from the previous instance (next recovery {takeover[0]}, {takeover[1]}'
+                          f'{f", along its plan of {len(takeover[2])} poses" if takeover[2] else ""})')
         return True
 
     def _handed_over(self) -> bool:

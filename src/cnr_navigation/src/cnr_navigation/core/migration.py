@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Dict, Mapping, Optional
+from typing import Any, Dict, Mapping, Optional, Tuple
 
 from cnr_navigation.core.geometry import Quaternion, quaternion_problem, quaternion_to_yaw
 
@@ -40,6 +40,9 @@ class GoalRecord:
         cancel_requested: the client asked to cancel it (the next instance preempts it at once).
         recovery_index: the next recovery behaviour to run (0: the first).
         recovery_trigger: what the recovery sequence is recovering from (a RecoveryTrigger name).
+        plan: the global plan ((x, y, yaw) per pose, in the global frame) the goal was being controlled along
+            (empty: it was not being controlled, e.g. planning or recovering). The next instance controls along
+            it at once instead of planning first; its planner replans at ``planner_frequency`` as after any plan.
     """
 
     id: str
@@ -52,6 +55,7 @@ class GoalRecord:
     cancel_requested: bool = False
     recovery_index: int = 0
     recovery_trigger: str = 'PLANNING_R'
+    plan: Tuple[Tuple[float, float, float], ...] = ()
 
     def to_dict(self, with_recovery: bool) -> Dict[str, Any]:
         out: Dict[str, Any] = {'id': self.id, 'stamp_secs': self.stamp_secs, 'stamp_nsecs': self.stamp_nsecs,
@@ -60,6 +64,7 @@ class GoalRecord:
         if with_recovery:
             out['recovery_index'] = self.recovery_index
             out['recovery_trigger'] = self.recovery_trigger
+            out['plan'] = [list(p) for p in self.plan]
         return out
 
 
@@ -114,8 +119,9 @@ def _record(d: Any, where: str, with_recovery: bool, recoveries: int) -> Optiona
         return None
     if not isinstance(d, dict):
         raise ValueError(f'move_base state: {where} must be an object or null, got {type(d).__name__}')
-    index, trigger = 0, 'PLANNING_R'
+    index, trigger, plan = 0, 'PLANNING_R', ()
     if with_recovery:
+        plan = _plan(d.get('plan', []), where)
         index = _int(d, 'recovery_index', where, 0, recoveries)
         trigger = d.get('recovery_trigger')
         if trigger not in RECOVERY_TRIGGERS:
@@ -125,7 +131,20 @@ def _record(d: Any, where: str, with_recovery: bool, recoveries: int) -> Optiona
                       stamp_nsecs=_int(d, 'stamp_nsecs', where, 0, 999_999_999), frame=_str(d, 'frame', where),
                       x=_float(d, 'x', where), y=_float(d, 'y', where), yaw=_float(d, 'yaw', where),
                       cancel_requested=_bool(d, 'cancel_requested', where), recovery_index=index,
-                      recovery_trigger=trigger)
+                      recovery_trigger=trigger, plan=plan)
+
+
+def _plan(v: Any, where: str) -> Tuple[Tuple[float, float, float], ...]:
+    """A handed-over plan: a list of [x, y, yaw] of finite numbers (absent in a state of an older instance)."""
+    if not isinstance(v, list):
+        raise ValueError(f'move_base state: {where}.plan must be a list of [x, y, yaw], got {type(v).__name__}')
+    out = []
+    for i, p in enumerate(v):
+        if (not isinstance(p, list) or len(p) != 3
+                or not all(isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) for c in p)):
+            raise ValueError(f'move_base state: {where}.plan[{i}] must be [x, y, yaw] of finite numbers, got {p!r}')
+        out.append((float(p[0]), float(p[1]), float(p[2])))
+    return tuple(out)
 
 
 def parse_state(state: Any, recoveries: int) -> HandOver:

@@ -239,6 +239,28 @@ class MoveBaseCore:
             self.recovery_index = index
             self.recovery_trigger = RecoveryTrigger[trigger]
 
+    def restore_plan(self, plan: np.ndarray, now: float) -> None:
+        """Continue a goal taken over while it was being controlled (call after :meth:`new_goal`): control along
+        the previous instance's global plan ((N, 3)) at once, as after a plan of its own; the planner replans
+        ``1 / planner_frequency`` s later (or never, at 0), as it would have."""
+        plan = np.asarray(plan, dtype=np.float64).reshape(-1, 3)
+        with self.lock:
+            if self.goal is None or plan.shape[0] == 0:
+                return
+            self.plan = plan
+            self.new_global_plan = True
+            self.state = NavState.CONTROLLING
+            self.t.last_valid_plan = now
+            if self.cfg.planner_frequency > 0:
+                self.t.next_plan_time = now + 1.0 / self.cfg.planner_frequency
+            else:
+                self.run_planner_flag = False
+
+    def controlled_plan(self) -> Optional[np.ndarray]:
+        """The global plan the goal is being controlled along (None if it is not being controlled)."""
+        with self.lock:
+            return None if self.state != NavState.CONTROLLING or self.plan is None else self.plan.copy()
+
     def resume(self, now: float) -> None:
         """The control loop was paused (outputs closed while the lease lapsed) and runs again at ``now`` [s]:
         the patience and oscillation timers restart, so the pause itself triggers no recovery."""
