@@ -34,8 +34,7 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
         """Create the action's publishers, subscribers and status timer now, without starting the server: a
         standby does this ahead of its promotion (their registrations with the master and the connections take
         ≈ 1 s on the capped robot). Until :meth:`start_with`, goals and cancels are ignored and no status goes out
-        (actionlib's ``started`` flag). :meth:`release` unregisters them (actionlib's ``stop``); a server started
-        again after it creates them anew."""
+        (actionlib's ``started`` flag), as after :meth:`release`."""
         a = self.action_server
         with a.lock, self.lock:
             if not self._prepared:
@@ -96,13 +95,12 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
 
     def release(self) -> None:
         """Close the server and forget its goals without a terminal status (handed over to another instance):
-        no more goals, cancels, status, feedback or results. :meth:`start_with` may open it again."""
+        no more goals, cancels, status, feedback or results. Its publishers and subscribers stay, silent, as a
+        prepared server's (no unregistering while the hand-over waits); :meth:`start_with` may open it again."""
         a = self.action_server
         with a.lock, self.lock:
-            if a.started:
-                a.stop()                # unregisters the publishers and subscribers: prepared anew when started
-                self._prepared = False
-            a.status_list = []
+            a.started = False           # actionlib: goals and cancels ignored, no status (its stop() would also
+            a.status_list = []          # unregister everything: slow on the capped robot)
             self.current_goal = ServerGoalHandle()
             self.next_goal = ServerGoalHandle()
             self.new_goal = self.preempt_request = self.new_goal_preempt_request = False

@@ -87,6 +87,7 @@ class MoveBaseNode(Hooks):
         # pursues; replaced whole, so get_state reads it without the state machine's lock
         self.pursuit: Optional[Tuple[str, Pose2D, int, str]] = None
         self.services: List[rospy.Service] = []
+        self.closing: List[rospy.Service] = []     # a frozen instance's services, unregistered after the freeze
         self.reconfigure_servers: List[ReconfigureServer] = []
         self.ready = threading.Event()           # the node is complete (the instance may be promoted before)
         self.server = TakeoverActionServer('move_base', MoveBaseAction, self._execute)
@@ -316,6 +317,7 @@ class MoveBaseNode(Hooks):
         with self.open_lock:
             if self.outputs_open or self.instance.frozen or rospy.core.is_shutdown_requested():
                 return
+            self._close_frozen()               # promoted again before after_frozen ran: the same names
             with self.output_lock:
                 self.outputs_open = True
             a = self.server.action_server
@@ -350,13 +352,21 @@ class MoveBaseNode(Hooks):
             self.core.reset()
             self.pursuit = None
             self.handover = None
-            for srv in self.services:
-                srv.shutdown('frozen for a migration')
+            self.closing += self.services                  # unregistered once the freeze was answered
             self.services = []
             for server in self.reconfigure_servers:
                 if server.set_service is not None:
-                    server.set_service.shutdown('frozen for a migration')
+                    self.closing.append(server.set_service)
                     server.set_service = None
+
+    def after_frozen(self) -> None:
+        with self.open_lock:
+            self._close_frozen()
+
+    def _close_frozen(self) -> None:
+        closing, self.closing = self.closing, []
+        for srv in closing:
+            srv.shutdown('frozen for a migration')
 
     # ================================================================================================
     # callbacks

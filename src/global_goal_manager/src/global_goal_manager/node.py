@@ -29,6 +29,8 @@ class GoalManagerNode(Hooks):
         self.states = None
         self.last_goal: Optional[int] = None
         self.service: Optional[rospy.Service] = None
+        self.closing: Optional[rospy.Service] = None      # a frozen instance's service, unregistered after the freeze
+        self.cleanup = threading.Lock()
         self.instance = ManagedInstance('global_goal_manager', self)
         self.pub = self.instance.publisher('global_goal', PoseStamped, queue_size=1, latch=True)
         rospy.Subscriber('cell_states', CellStates, self._on_states, queue_size=1)
@@ -50,13 +52,22 @@ class GoalManagerNode(Hooks):
             self.last_goal = state.get('last_goal')
 
     def on_active(self) -> None:
-        if self.service is None:
-            self.service = rospy.Service('~next_goal', NextGoal, self._next_goal)
+        with self.cleanup:
+            self._close_frozen()              # (promoted again before after_frozen ran: the same name)
+            if self.service is None:
+                self.service = rospy.Service('~next_goal', NextGoal, self._next_goal)
 
     def on_frozen(self) -> None:
-        if self.service is not None:
-            self.service.shutdown('frozen for a migration')
-            self.service = None
+        self.closing, self.service = self.service, None      # it answers "not active" until unregistered
+
+    def after_frozen(self) -> None:
+        with self.cleanup:
+            self._close_frozen()
+
+    def _close_frozen(self) -> None:
+        if self.closing is not None:
+            self.closing.shutdown('frozen for a migration')
+            self.closing = None
 
     def _on_states(self, msg: CellStates) -> None:
         with self.lock:

@@ -57,7 +57,12 @@ class Hooks:
         """Outputs open (first activation, or again after a lapse)."""
 
     def on_frozen(self) -> None:
-        """Outputs closed for good (frozen for a migration, or superseded)."""
+        """Outputs closed for good (frozen for a migration, or superseded). Runs before the freeze is answered:
+        keep it quick (the hand-over waits for it); the outputs are already gated by ``active``."""
+
+    def after_frozen(self) -> None:
+        """Slow clean-up after a freeze (e.g. unregistering services with the master), in a thread of its own
+        once the freeze was answered. A promotion that follows (a rolled-back migration) may run meanwhile."""
 
 
 def topic(module: str, leaf: str) -> str:
@@ -178,6 +183,7 @@ class ManagedInstance:
                 self.message = f'frozen at term {req.term}'
                 self.hooks.on_frozen()
                 self._status()
+                threading.Thread(target=self.hooks.after_frozen, name='after-frozen', daemon=True).start()
                 rospy.loginfo(f'{self.id}: frozen (term {req.term}); state {len(data)} bytes handed over')
                 return InstanceControlResponse(ok=True, message=self.message, term=req.term, state=data)
             if req.command == 'promote':
@@ -245,6 +251,7 @@ class ManagedInstance:
                     rospy.logwarn(f'{self.id}: superseded (term {self.holder.term} is over): outputs closed, '
                                   f'shutting down')
                     self.hooks.on_frozen()
+                    self.hooks.after_frozen()
                     self._status()
                     rospy.signal_shutdown('superseded by a newer term')
                     return
