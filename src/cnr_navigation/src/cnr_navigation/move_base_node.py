@@ -43,7 +43,7 @@ from cnr_navigation.core.planner import GlobalPlanner, PlanningError, path_with_
 from cnr_navigation.core.recovery import ClearCostmapRecovery, Recovery, RotateRecovery
 from cnr_navigation.costmap_ros import CostmapROS
 from cnr_navigation.ros_io import RosParamReader, TfHelper, path_msg, pose_stamped, pose_to_2d
-from migration_manager.instance import Hooks, ManagedInstance, prepare_process
+from migration_manager.instance import Hooks, ManagedInstance, Retiring, prepare_process
 
 
 class _RecoveryBackend:
@@ -87,7 +87,7 @@ class MoveBaseNode(Hooks):
         # pursues; replaced whole, so get_state reads it without the state machine's lock
         self.pursuit: Optional[Tuple[str, Pose2D, int, str]] = None
         self.services: List[rospy.Service] = []
-        self.closing: List[rospy.Service] = []     # a frozen instance's services, unregistered after the freeze
+        self.retiring = Retiring()               # a frozen instance's services, unregistered after the freeze
         self.reconfigure_servers: List[ReconfigureServer] = []
         self.ready = threading.Event()           # the node is complete (the instance may be promoted before)
         self.server = TakeoverActionServer('move_base', MoveBaseAction, self._execute)
@@ -317,7 +317,7 @@ class MoveBaseNode(Hooks):
         with self.open_lock:
             if self.outputs_open or self.instance.frozen or rospy.core.is_shutdown_requested():
                 return
-            self._close_frozen()               # promoted again before after_frozen ran: the same names
+            self.retiring.close()              # promoted again before after_frozen ran: the same names
             with self.output_lock:
                 self.outputs_open = True
             a = self.server.action_server
@@ -349,24 +349,21 @@ class MoveBaseNode(Hooks):
             self.outputs_open = False
         with self.open_lock:
             self.server.release()
-            self.core.reset()
             self.pursuit = None
             self.handover = None
-            self.closing += self.services                  # unregistered once the freeze was answered
+            self.retiring.add(*self.services)              # unregistered once the freeze was answered
             self.services = []
             for server in self.reconfigure_servers:
-                if server.set_service is not None:
-                    self.closing.append(server.set_service)
-                    server.set_service = None
+                self.retiring.add(server.set_service)
+                server.set_service = None
 
     def after_frozen(self) -> None:
+        """The goal dropped (the control loop ends at its next look: the instance is frozen; dropping it here does
+        not make the freeze wait for a control cycle), the services unregistered."""
         with self.open_lock:
-            self._close_frozen()
-
-    def _close_frozen(self) -> None:
-        closing, self.closing = self.closing, []
-        for srv in closing:
-            srv.shutdown('frozen for a migration')
+            if self.instance.frozen:           # not promoted again meanwhile (a rolled-back migration)
+                self.core.reset()
+            self.retiring.close()
 
     # ================================================================================================
     # callbacks

@@ -18,7 +18,7 @@ from cnr_msgs.msg import CellStates
 from cnr_msgs.srv import NextGoal, NextGoalResponse
 from cnr_params.ros import init_node, private_section, quiet_at_shutdown
 from global_goal_manager.core.policies import CellView, GoalManagerParams, read_params
-from migration_manager.instance import Hooks, ManagedInstance
+from migration_manager.instance import Hooks, ManagedInstance, Retiring
 
 
 class GoalManagerNode(Hooks):
@@ -29,8 +29,7 @@ class GoalManagerNode(Hooks):
         self.states = None
         self.last_goal: Optional[int] = None
         self.service: Optional[rospy.Service] = None
-        self.closing: Optional[rospy.Service] = None      # a frozen instance's service, unregistered after the freeze
-        self.cleanup = threading.Lock()
+        self.retiring = Retiring()
         self.instance = ManagedInstance('global_goal_manager', self)
         self.pub = self.instance.publisher('global_goal', PoseStamped, queue_size=1, latch=True)
         rospy.Subscriber('cell_states', CellStates, self._on_states, queue_size=1)
@@ -52,22 +51,16 @@ class GoalManagerNode(Hooks):
             self.last_goal = state.get('last_goal')
 
     def on_active(self) -> None:
-        with self.cleanup:
-            self._close_frozen()              # (promoted again before after_frozen ran: the same name)
-            if self.service is None:
-                self.service = rospy.Service('~next_goal', NextGoal, self._next_goal)
+        self.retiring.close()                 # (promoted again before after_frozen ran: the same name)
+        if self.service is None:
+            self.service = rospy.Service('~next_goal', NextGoal, self._next_goal)
 
     def on_frozen(self) -> None:
-        self.closing, self.service = self.service, None      # it answers "not active" until unregistered
+        self.retiring.add(self.service)       # it answers "not active" until unregistered
+        self.service = None
 
     def after_frozen(self) -> None:
-        with self.cleanup:
-            self._close_frozen()
-
-    def _close_frozen(self) -> None:
-        if self.closing is not None:
-            self.closing.shutdown('frozen for a migration')
-            self.closing = None
+        self.retiring.close()
 
     def _on_states(self, msg: CellStates) -> None:
         with self.lock:

@@ -23,7 +23,7 @@ from cnr_params.ros import call_with_timeout, init_node, private_section, quiet_
 from local_mapcell_manager.core.ledger import DUPLICATE, Ledger, Reading, Replay, state_newest
 from local_mapcell_manager.core.params import ManagerParams, read_params
 from local_mapcell_manager.core.store import CellBook, MeasurementStore
-from migration_manager.instance import Hooks, ManagedInstance
+from migration_manager.instance import Hooks, ManagedInstance, Retiring
 
 NOT_ACTIVE = 'not the active instance (standby, frozen or lease lapsed)'
 
@@ -56,8 +56,7 @@ class ManagerNode(Hooks):
         self.recover_proxy = (rospy.ServiceProxy(p.recover_service, GetRecentMeasurements)
                               if p.recover_service else None)
         self.services: list = []
-        self.closing: list = []                         # a frozen instance's services, unregistered after the freeze
-        self.cleanup = threading.Lock()
+        self.retiring = Retiring()
         self._constructed = threading.Event()          # on_active (instance thread) waits for the publishers
         self.instance: Optional[ManagedInstance] = None
         self.sub: Optional[rospy.Subscriber] = None
@@ -162,33 +161,24 @@ class ManagerNode(Hooks):
             with self.lock:                             # output gap ends here
                 self._flush()
             self._publish(force=True)
-        with self.cleanup:
-            self._close_frozen()                        # (promoted again before after_frozen ran: same names)
-            if not self.services:                       # registrations with the master take a while
-                self.services = [
-                    rospy.Service('~get_cell', GetCell, self._get_cell),
-                    rospy.Service('~get_cell_states', GetCellStates, self._get_cell_states),
-                    rospy.Service('~get_measurements', GetMeasurements, self._get_measurements)]
+        self.retiring.close()                           # (promoted again before after_frozen ran: same names)
+        if not self.services:                           # registrations with the master take a while
+            self.services = [
+                rospy.Service('~get_cell', GetCell, self._get_cell),
+                rospy.Service('~get_cell_states', GetCellStates, self._get_cell_states),
+                rospy.Service('~get_measurements', GetMeasurements, self._get_measurements)]
 
     def on_frozen(self) -> None:
         with self.instance.lock, self.lock:
             self._sync_frozen()
             pub, self.pub = self.pub, None
-            self.closing, self.services = self.closing + self.services + ([pub] if pub is not None else []), []
+            self.retiring.add(pub, *self.services)
+            self.services = []
 
     def after_frozen(self) -> None:
         """The services (they refuse while frozen) and the latched cell_states (none of a frozen instance for late
         subscribers) are unregistered once the freeze was answered."""
-        with self.cleanup:
-            self._close_frozen()
-
-    def _close_frozen(self) -> None:
-        closing, self.closing = self.closing, []
-        for x in closing:
-            if isinstance(x, rospy.Publisher):
-                x.unregister()
-            else:
-                x.shutdown('frozen for a migration')
+        self.retiring.close()
 
     def _sync_frozen(self) -> None:
         """Under self.lock: a frozen instance stores nothing more and buffers again (a rollback may promote it

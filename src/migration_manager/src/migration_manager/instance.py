@@ -65,6 +65,29 @@ class Hooks:
         once the freeze was answered. A promotion that follows (a rolled-back migration) may run meanwhile."""
 
 
+class Retiring:
+    """A frozen instance's services and publishers: unregistered with the master once the freeze was answered
+    (``Hooks.after_frozen`` calls :meth:`close`), or by a promotion that follows before that (a rolled-back
+    migration registers the same names again: it calls :meth:`close` first, which waits for one in progress)."""
+
+    def __init__(self) -> None:
+        self.lock = threading.Lock()
+        self.pending: list = []
+
+    def add(self, *handles) -> None:
+        with self.lock:
+            self.pending += [h for h in handles if h is not None]
+
+    def close(self) -> None:
+        with self.lock:
+            pending, self.pending = self.pending, []
+            for h in pending:
+                if isinstance(h, rospy.Publisher):
+                    h.unregister()
+                else:
+                    h.shutdown('frozen for a migration')
+
+
 def topic(module: str, leaf: str) -> str:
     return f'/migration/{module}/{leaf}'
 

@@ -257,9 +257,11 @@ class MoveBaseCore:
                 self.run_planner_flag = False
 
     def controlled_plan(self) -> Optional[np.ndarray]:
-        """The global plan the goal is being controlled along (None if it is not being controlled)."""
-        with self.lock:
-            return None if self.state != NavState.CONTROLLING or self.plan is None else self.plan.copy()
+        """The global plan the goal is being controlled along (None if it is not being controlled). Without the
+        lock (a freeze must not wait for a control cycle): ``state`` and ``plan`` are each replaced whole, never
+        changed in place."""
+        state, plan = self.state, self.plan
+        return None if state != NavState.CONTROLLING or plan is None else plan.copy()
 
     def resume(self, now: float) -> None:
         """The control loop was paused (outputs closed while the lease lapsed) and runs again at ``now`` [s]:
