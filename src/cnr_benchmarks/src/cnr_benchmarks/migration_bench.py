@@ -48,7 +48,7 @@ class Bench:
         self.args = args
         self.out = os.path.abspath(args.out)
         os.makedirs(self.out, exist_ok=True)
-        self.cfg_dir = os.path.join(report.WS, 'config')
+        self.cfg_dir = os.path.abspath(args.config_dir)
         self.tb = Testbed(os.path.join(self.cfg_dir, 'testbed.yaml'))
         self.robot = RosSide(self.tb, 'robot', port=args.port, log_dir=os.path.join(self.out, 'logs'))
         self.cloud = RosSide(self.tb, 'cloud', port=args.port, log_dir=os.path.join(self.out, 'logs'))
@@ -273,6 +273,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     ap.add_argument('--settle', type=float, default=3.0, help='s after each migration before the next')
     ap.add_argument('--out', default=os.path.join(report.DEFAULT_OUT, 'migration'))
     ap.add_argument('--port', type=int, default=11411)
+    ap.add_argument('--config-dir', default=os.path.join(report.WS, 'config'),
+                    help='the configuration (e.g. a copy whose testbed.yaml turns the robot CPU cap off)')
     args = ap.parse_args(argv)
     args.argv = list(argv if argv is not None else sys.argv[1:])
     args.modules = [m for m in args.modules.split(',') if m]
