@@ -109,8 +109,8 @@ class Bench:
                             os.path.join(self.out, 'mission.log'))
         report.progress(f'two-host mission with --migration starting (log {self.out}/mission.log)')
         modules = self.args.modules
-        if not self.wait('every module active on the robot',
-                         lambda: all(self.placement().get(m) == 'robot' for m in modules), 300):
+        if not self.wait('every module active on the robot', lambda: not self.mission.alive() or all(
+                self.placement().get(m) == 'robot' for m in modules), 300) or not self.mission.alive():
             raise RuntimeError(f'the modules did not come up (see {self.out}/mission.log and the report logs)')
         self.robot.call('setParam', '/migration_probe', dict(
             topics=sorted({t for m, t in OUTPUT_TOPIC.items() if t.startswith('/')} | {'/merged_measurements'}),
