@@ -38,18 +38,20 @@ class ControlLink:
 
     def call(self, **request) -> Tuple[bool, object]:
         with self.lock:
-            for attempt in (1, 2):
-                fresh = self.proxy is None
-                if fresh:
-                    self.proxy = rospy.ServiceProxy(self.name, InstanceControl, persistent=True)
-                started = time.monotonic()
-                ok, res = call_with_timeout(self.proxy, self.timeout, **request)
-                if ok:
-                    return ok, res
-                self.proxy.close()
-                self.proxy = None
-                if fresh or isinstance(res, TimeoutError) or time.monotonic() - started > 1.0:
-                    return ok, res
+            reused = self.proxy is not None
+            started = time.monotonic()
+            ok, res = self._once(request)
+            stale = reused and not ok and not isinstance(res, TimeoutError) and time.monotonic() - started <= 1.0
+            return self._once(request) if stale else (ok, res)
+
+    def _once(self, request: dict) -> Tuple[bool, object]:
+        if self.proxy is None:
+            self.proxy = rospy.ServiceProxy(self.name, InstanceControl, persistent=True)
+        ok, res = call_with_timeout(self.proxy, self.timeout, **request)
+        if not ok:
+            self.proxy.close()
+            self.proxy = None
+        return ok, res
 
 
 @dataclass
