@@ -186,3 +186,22 @@ def test_missing_robot_cpu_section(tmp_path):
     path.write_text(yaml.safe_dump(doc))
     with pytest.raises(ConfigError, match='testbed.robot_cpu: missing'):
         load_testbed(str(path))
+
+
+def test_process_labels_for_the_cpu_breakdown():
+    assert core.process_label(['/usr/bin/python3', '/opt/ws/nodes/mfg_node', '__name:=mfg', '__log:=x']) == 'mfg'
+    assert core.process_label(['/usr/bin/python3', '/usr/bin/rosmaster', '--core', '-p', '11411']) == 'rosmaster'
+    assert core.process_label(['/usr/bin/python3', '-u', '/usr/bin/roslaunch', 'a.launch']) == 'roslaunch'
+    assert core.process_label(['iperf3', '-s']) == 'iperf3'
+    assert core.process_label([]) == ''
+
+
+def test_a_group_breaks_its_cpu_down_by_process(tmp_path):
+    """The pids of a group's cgroup.procs, labelled and summed (this test's own process stands in for a node)."""
+    d = tmp_path / 'cpu' / 'g'
+    d.mkdir(parents=True)
+    (d / 'cgroup.procs').write_text(f'{os.getpid()}\n999999999\n')       # the second: no such process
+    cg = CpuCgroup(Layout(1, str(tmp_path / 'cpu'), None), 'g')
+    totals = cg.by_process()
+    assert list(totals) == [core.process_label(open('/proc/self/cmdline').read().split('\0')[:-1]) or 'python3']
+    assert next(iter(totals.values())) > 0

@@ -177,7 +177,8 @@ class TwoHostMission:
             th = cg.throttling()
             return dict(cgroup=self.testbed.robot_cgroup, limit_cpus=cpus, period_us=period,
                         cpu_seconds=cg.usage_seconds(), throttled_periods=th.throttled,
-                        periods=th.periods, throttled_seconds=th.throttled_seconds)
+                        periods=th.periods, throttled_seconds=th.throttled_seconds,
+                        by_process={k: round(v, 2) for k, v in cg.by_process().items()})
         except (OSError, cpucap.NoCgroup, ValueError) as exc:
             return dict(cgroup=None, problem=str(exc))
 

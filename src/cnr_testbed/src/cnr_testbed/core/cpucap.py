@@ -12,6 +12,7 @@ share of a CPU needs a period of at least ``1 ms / cpus``.
 from __future__ import annotations
 
 import math
+import os
 import re
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Tuple
@@ -219,3 +220,18 @@ def throttling(version: int, cpu_stat: str) -> Throttling:
 def parse_pids(text: str) -> List[int]:
     """The pids of a cgroup.procs text."""
     return [int(x) for x in text.split()]
+
+
+def process_label(cmdline: List[str]) -> str:
+    """What a process of the robot is, for a CPU breakdown: a ROS node's name (``__name:=``), else the program
+    (the script a Python interpreter runs, e.g. ``rosmaster``, ``roslaunch``), '' for an empty command line."""
+    for arg in cmdline:
+        if arg.startswith('__name:='):
+            return arg.split(':=', 1)[1]
+    args = [a for a in cmdline if a and not a.startswith('-')]
+    if not args:
+        return ''
+    prog = os.path.basename(args[0])
+    if prog.startswith('python') and len(args) > 1:
+        prog = os.path.basename(args[1])
+    return prog
