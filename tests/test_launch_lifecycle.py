@@ -57,6 +57,29 @@ def test_a_node_configuration_error_ends_the_launch_with_exit_2_without_respawn(
     assert 'restarting process' not in out, out[-3000:]
 
 
+def test_a_managed_move_base_with_a_bad_migration_setting_exits_2_at_once(tmp_path):
+    """The error is found after init_node, with move_base's non-daemon threads running: the node still leaves at
+    once, so its launch ends with status 2 (a migration agent's standby is then reported exited, and the
+    migration that started it rolls back at once instead of waiting out the start timeout)."""
+    cfg = tmp_path / 'config'
+    subprocess.run(['cp', '-rL', os.path.join(WS, 'config'), str(cfg)], check=True)
+    with open(cfg / 'migration.yaml') as f:
+        mig = yaml.safe_load(f)
+    del mig['control_nice']
+    with open(cfg / 'migration.yaml', 'w') as f:
+        yaml.safe_dump(mig, f)
+    with RosMaster(use_sim_time=True) as master:
+        proc = master.run(['rosrun', 'cnr_bringup', 'cnr_launch', 'cnr_mission', 'modules.launch', 'move_base:=true',
+                           'migration_role:=standby', 'migration_host:=robot', f'config_dir:={cfg}',
+                           f'map:={WS}/maps/corridor.yaml', f'scenario_file:={CORRIDOR}',
+                           f'store:={tmp_path}/store.tsv'], log_name='bad_migration')
+        wait_until(lambda: not proc.alive(), 60, 'the launch to end after the configuration error')
+        code = proc.returncode
+        out = proc.output()
+    assert code == 2, out[-3000:]
+    assert 'control_nice: missing' in out and 'move_base exited with a configuration error' in out, out[-3000:]
+
+
 def test_ctrl_c_stops_every_node_without_escalation(tmp_path):
     """SIGINT to the launch's process group (a terminal's Ctrl-C) stops the whole mission quietly."""
     report = str(tmp_path / 'report')

@@ -312,9 +312,35 @@ def test_config_from_the_workspace_and_errors_name_the_field(workspace):
     bad = dict(data, hot_standby=['kestrel_driver'])
     with pytest.raises(ConfigError, match='hot_standby'):
         from_section(Section(bad, 'config/migration.yaml'))
+    bad = dict(data, control_nice=-21)
+    with pytest.raises(ConfigError, match='control_nice'):
+        from_section(Section(bad, 'config/migration.yaml'))
     del data['timeouts']
     with pytest.raises(ConfigError, match='timeouts'):
         from_section(Section(data, 'config/migration.yaml'))
+
+
+def test_the_control_plane_priority_is_given_per_thread():
+    """The calling thread gets the nice value, once; the process's other threads keep theirs. (A positive
+    value, which needs no privilege, stands in for the configured one.)"""
+    import threading
+    from migration_manager.core.priority import Elevator, thread_nice
+    warnings = []
+    main_nice = thread_nice(threading.get_native_id())
+    seen = {}
+
+    def protocol_thread():
+        e = Elevator(main_nice + 3, warnings.append)
+        e.this_thread()
+        e.this_thread()
+        seen['nice'] = thread_nice(threading.get_native_id())
+    t = threading.Thread(target=protocol_thread)
+    t.start()
+    t.join()
+    assert seen['nice'] == main_nice + 3 and not warnings
+    assert thread_nice(threading.get_native_id()) == main_nice
+    Elevator(0, warnings.append).this_thread()          # 0: left as it is
+    assert thread_nice(threading.get_native_id()) == main_nice and not warnings
 
 
 # ---------------------------------------------------------------------------- the configured rule

@@ -202,6 +202,14 @@ def exit_on_config_error(main: Callable[..., T]) -> Callable[..., T]:
             prog = os.path.basename(sys.argv[0]) if sys.argv and sys.argv[0] else 'node'
             sys.stderr.write(f'[{prog}] configuration error: {exc}\n')
             sys.stderr.flush()
+            rospy = sys.modules.get('rospy')
+            if rospy is not None and rospy.core.is_initialized():
+                # a node that found the error after init_node may have started threads that are not daemons
+                # (tf2, actionlib, its own loops): SystemExit would leave the process waiting for them, and its
+                # launch and migration agent with it. Unregister from the master, then leave at once.
+                rospy.signal_shutdown('configuration error')
+                sys.stdout.flush()
+                os._exit(EXIT_CONFIG)
             raise SystemExit(EXIT_CONFIG) from None
 
     return wrapper

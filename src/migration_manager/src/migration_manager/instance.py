@@ -36,6 +36,7 @@ from cnr_params.ros import distinct_callerid, private_section
 from migration_manager.core import state as state_codec
 from migration_manager.core.config import MigrationConfig, from_section
 from migration_manager.core.lease import Answer, Holder, instance_id
+from migration_manager.core.priority import Elevator
 
 INSTANCE_HEADER = 'cnr_instance'       # connection header of a managed instance's output publishers
 
@@ -129,6 +130,7 @@ class ManagedInstance:
             raise section.error('host', f'must be one of {", ".join(self.cfg.hosts)}, got {self.host!r}')
         self.id = instance_id(module, self.host)
         self.holder = Holder(module, self.id)
+        self.elevator = Elevator(self.cfg.control_nice, rospy.logwarn)   # the protocol's threads (core.priority)
         self.state_seq = 0
         self.renew_pub = rospy.Publisher(topic(module, 'renew'), MigrationRenew, queue_size=10)
         self.state_pub = rospy.Publisher(topic(module, 'state'), ModuleState, queue_size=2)
@@ -175,6 +177,7 @@ class ManagedInstance:
         self.status_pub.publish(msg)
 
     def _on_lease(self, msg: MigrationLease) -> None:
+        self.elevator.this_thread()
         with self.lock:
             self.holder.on_answer(Answer(msg.module, msg.term, msg.holder, msg.nonce, msg.granted, msg.duration))
         if msg.granted and msg.holder == self.id and not self.was_active:
@@ -190,6 +193,7 @@ class ManagedInstance:
         self.renew_pub.publish(MigrationRenew(module=self.module, instance=self.id, term=term, nonce=nonce))
 
     def _on_control(self, req) -> InstanceControlResponse:
+        self.elevator.this_thread()
         try:
             if req.command == 'state':
                 ready = self.holder.term > 0 or bool(self.hooks.standby_ready())
@@ -252,6 +256,7 @@ class ManagedInstance:
 
     def _loop(self) -> None:
         cfg = self.cfg
+        self.elevator.this_thread()
         next_renew = next_state = next_status = time.monotonic()
         last_role = ''
         while not rospy.core.is_shutdown_requested():

@@ -19,6 +19,7 @@ from cnr_msgs.msg import AgentHealth, InstanceStatus, MigrationEvent, MigrationL
 from cnr_msgs.srv import AgentCommand, InstanceControl, Migrate, MigrateResponse
 from cnr_params.ros import call_with_timeout, init_node, private_section
 from migration_manager.core.config import from_section
+from migration_manager.core.priority import Elevator
 from migration_manager.core.lease import Answer, Grantor, host_of, instance_id
 from migration_manager.core.plan import Migration, Step
 from migration_manager.instance import topic
@@ -81,6 +82,7 @@ class Manager:
     def __init__(self) -> None:
         p = private_section('~')
         self.cfg = cfg = from_section(p.section('migration'))
+        Elevator(cfg.control_nice, rospy.logwarn).whole_process()
         placement = p.raw('placement')
         if not isinstance(placement, dict):
             raise p.error('placement', f'must map modules to hosts, got {placement!r}')

@@ -38,6 +38,7 @@ class MigrationConfig:
     stop_timeout: float
     restart_delay: float
     log_dir: str
+    control_nice: int            # nice value of the manager and of the instances' protocol threads (core.priority)
 
     def other(self, host: str) -> str:
         return next(h for h in self.hosts if h != host)
@@ -83,4 +84,5 @@ def from_section(s: Section) -> MigrationConfig:
         failover=s.boolean('failover'), hot_standby=_names(s, 'hot_standby', modules),
         stop_timeout=agent.number('stop_timeout', positive=True),
         restart_delay=agent.number('restart_delay', minimum=0.0),
-        log_dir=os.path.abspath(os.path.expanduser(log_dir)))
+        log_dir=os.path.abspath(os.path.expanduser(log_dir)),
+        control_nice=s.integer('control_nice', minimum=-20, maximum=19))
