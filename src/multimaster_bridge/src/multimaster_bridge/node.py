@@ -62,17 +62,20 @@ class MasterClient:
             self._server('close')()
             self._server = None
 
-    def snapshot(self, previous: Optional[sync.Snapshot], refresh_nodes: bool) -> sync.Snapshot:
+    def system_state(self, previous: Optional[sync.Snapshot], refresh: bool) -> sync.Snapshot:
+        """getSystemState; the topic types only when a published topic is new to ``previous`` (or ``refresh``):
+        parsing getTopicTypes' answer on every poll cost as much again."""
         _code, _, state = self._proxy().getSystemState(self.caller_id)
-        # topic types only when a published topic is new to the previous snapshot (or at a refresh): parsing
-        # getTopicTypes' answer on every poll was a quarter of the bridge's CPU
         published = {t for t, nodes in state[0] if nodes}
-        if previous is None or refresh_nodes or not published <= set(previous.types):
+        if previous is None or refresh or not published <= set(previous.types):
             code, _, types = self._proxy().getTopicTypes(self.caller_id)
             types = types if code == 1 else []
         else:
             types = [(t, previous.types[t]) for t in published]
-        snap = sync.Snapshot.from_system_state(state, types)
+        return sync.Snapshot.from_system_state(state, types)
+
+    def snapshot(self, previous: Optional[sync.Snapshot], refresh_nodes: bool) -> sync.Snapshot:
+        snap = self.system_state(previous, refresh_nodes)
         names = sorted(snap.node_names())
         services = sorted(snap.services)
         if (previous is not None and not refresh_nodes and set(names) <= set(previous.nodes)
