@@ -101,7 +101,7 @@ class TwoHostMission:
                  report_dir: str, port: int, link: Dict[str, float], trace: Optional[str],
                  link_map: Optional[str], migration: bool = False, rule: bool = False,
                  task: Optional[TaskMode] = None, network_aware: str = '') -> None:
-        self.config = ws_config
+        self.config = os.path.abspath(ws_config)
         self.scenario_file, self.map_file, self.start = scenario_file, map_file, start
         self.task = task
         self.network_aware = network_aware
@@ -214,9 +214,9 @@ class TwoHostMission:
             side.call('setParam', '/run_id', str(uuid.uuid1()))
         secret = self._secret()
         x, y, a = self.start
-        common = [f'scenario_file:={self.scenario_file}', f'map:={self.map_file}']
-        self._launch(self.robot, 'world', ['cnr_mission', 'world.launch', f'scenario_file:={self.scenario_file}',
-                                           f'map:={self.map_file}', f'x:={x}', f'y:={y}', f'a:={a}',
+        # every launch reads its nodes' configuration from the same directory as this process (--config-dir)
+        common = [f'scenario_file:={self.scenario_file}', f'map:={self.map_file}', f'config_dir:={self.config}']
+        self._launch(self.robot, 'world', ['cnr_mission', 'world.launch', *common, f'x:={x}', f'y:={y}', f'a:={a}',
                                            'real_time_factor:=1', f'report_dir:={self.report_dir}',
                                            f'placement:={self.placement.name}',
                                            f'battery_cpu_cgroup:={self.testbed.robot_cgroup}',
