@@ -44,27 +44,21 @@ class Elevator:
 
     def this_thread(self) -> None:
         """Elevate the calling thread (cheap after the first call from a thread)."""
-        tid = threading.get_native_id()
+        self._elevate(threading.get_native_id())
+
+    def whole_process(self) -> None:
+        """Elevate every thread of this process (threads it creates later inherit the value)."""
+        for name in os.listdir('/proc/self/task'):
+            self._elevate(int(name))
+
+    def _elevate(self, tid: int) -> None:
         if self.nice == 0 or tid in self.done:
             return
         with self.lock:
+            if tid in self.done:
+                return
             self.done.add(tid)
             problem = set_thread_nice(tid, self.nice)
             if problem and not self.failed:
                 self.failed = True
-                self.warn(f'control plane priority: {problem}; its threads keep their priority')
-
-    def whole_process(self) -> None:
-        """Elevate every thread of this process (threads it creates later inherit the value)."""
-        if self.nice == 0:
-            return
-        for name in os.listdir('/proc/self/task'):
-            tid = int(name)
-            with self.lock:
-                if tid in self.done:
-                    continue
-                self.done.add(tid)
-                problem = set_thread_nice(tid, self.nice)
-            if problem and not self.failed:
-                self.failed = True
-                self.warn(f'control plane priority: {problem}; the process keeps its priority')
+                self.warn(f'control plane priority: {problem}; those threads keep their priority')
