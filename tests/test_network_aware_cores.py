@@ -137,10 +137,17 @@ def test_plans_resolve_other_and_refuse_bad_runs(tmp_path):
     p = tmp_path / 'plan.yaml'
     p.write_text(yaml.safe_dump(doc))
     plan = load_plan(str(p))
-    assert len(plan.runs) == 6 and plan.runs[1].force == OTHER and plan.runs[0].link.rtt_ms <= 200
+    assert len(plan.runs) == 6 and plan.runs[0].link.rtt_ms <= 200 and plan.runs[0].link == plan.runs[1].link
+    # per condition: onload on a new profile (the modules home), then offload on the same profile
+    assert [(r.force, r.reuse_profile) for r in plan.runs[:2]] == [(ONLOAD, False), (OFFLOAD, True)]
     assert resolve_force(OTHER, OFFLOAD) == ONLOAD and resolve_force('', None) == ''
     with pytest.raises(ValueError):
         resolve_force(OTHER, '')
+    del doc['runs'][1]['reuse_profile']
+    p.write_text(yaml.safe_dump(doc))
+    with pytest.raises(ConfigError, match=r'runs\[1\]\.reuse_profile'):
+        load_plan(str(p))
+    doc['runs'][1]['reuse_profile'] = True
     doc['runs'][0]['force'] = 'other'
     p.write_text(yaml.safe_dump(doc))
     with pytest.raises(ConfigError, match=r'runs\[0\]\.force'):
@@ -185,6 +192,21 @@ def test_pairs_and_oracle():
     assert [p.condition for p in ps] == ['c1', 'c2']
     assert [campaign.oracle(p, CONTROL) for p in ps] == [OFFLOAD, ONLOAD]
     assert ps[1].offload == Outcome(9.0, 0.001, ABORTED)
+
+
+def test_pairs_of_onload_first_plans_take_the_first_runs_policy_as_the_decision():
+    def run(cid, placement, policy, learned='1', c_l=0.02):
+        r = _result(cid, placement, placement, COMPLETED, 30, 0.003, c_l=c_l)
+        r.update(force=placement, policy=policy, reason='forced', learned=learned)
+        return r
+    rows = []
+    for i in range(4):                                  # 8 rows learned: k = 5 reached after the third condition
+        rows += [run(f'c{i}', ONLOAD, OFFLOAD if i % 2 else ONLOAD), run(f'c{i}', OFFLOAD, 'ignored')]
+    rows += [run('c9', ONLOAD, ONLOAD, learned='0', c_l=math.nan), run('c9', OFFLOAD, ONLOAD, learned='0')]
+    ps = campaign.pairs(rows, k=5)
+    assert [(p.decided, p.reason) for p in ps] == [(ONLOAD, 'cold_start'), (OFFLOAD, 'cold_start'),
+                                                   (ONLOAD, 'cold_start'), (OFFLOAD, 'knn'), (ONLOAD, 'no_profile')]
+    assert ps[0].offload_row['id'] == 'c0-offload' and ps[0].onload_row['id'] == 'c0-onload'
 
 
 def test_noise_aware_oracle_calls_pairs_within_the_control_noise_either():

@@ -37,9 +37,9 @@ def test_a_good_link_offloads_and_a_bad_one_onloads_by_knn(tmp_path):
     write_control_values(control, ControlValues(TASK, 30.0, 3.0, 0.003, 0.0003, 20, '2026-11-24', 'test'))
     plan = dict(task=TASK, location=LOCATION, settle=6.0, runs=[
         dict(id='good', condition='good', link=dict(delay=1.0, rate=0.0, loss=0.0), force='', decide=True,
-             learn=True, explore=False),
+             learn=True, explore=False, reuse_profile=False),
         dict(id='bad', condition='bad', link=dict(delay=150.0, rate=0.0, loss=0.0), force='', decide=True,
-             learn=True, explore=False)])
+             learn=True, explore=False, reuse_profile=False)])
     plan_path = tmp_path / 'plan.yaml'
     plan_path.write_text(yaml.safe_dump(plan))
     results = str(tmp_path / 'results.tsv')

@@ -51,7 +51,7 @@ def write_analysis(args: argparse.Namespace) -> int:
         print(f'campaign analyse: {exc}', file=sys.stderr)
         return 2
     training, tw = TrainingSet(os.path.join(args.out, 'training'), args.task, args.location).read()
-    pairs = core.pairs(rows)
+    pairs = core.pairs(rows, cfg.decision.k)
     oracle = [core.oracle(p, control) for p in pairs]                      # strict: every pair has a winner
     tolerance = core.noise_tolerance(control)
     oracle_noise = [core.oracle(p, control, tolerance) for p in pairs]    # noise-aware: EITHER within the noise
@@ -75,6 +75,17 @@ def write_analysis(args: argparse.Namespace) -> int:
                 'train_conditions')
         f.write('\t'.join(keys) + '\n')
         for c in curve:
+            f.write('\t'.join(str(c[k]) for k in keys) + '\n')
+
+    # the same with one row per training pair labelled by the pair's (strict) oracle (core.paired_rows)
+    prs = core.paired_rows(pairs[:n_train], oracle[:n_train])
+    curve_p = core.learning_curve(prs, n_train, pairs[n_train:], oracle[n_train:], cfg.decision)
+    curve_pn = core.learning_curve(prs, n_train, pairs[n_train:], oracle_noise[n_train:], cfg.decision)
+    for c, cn in zip(curve_p, curve_pn):
+        c.update(knn_noise=cn['knn'], static_noise=cn['static'])
+    with open(os.path.join(args.out, 'learning_curve_paired.tsv'), 'w') as f:
+        f.write('\t'.join(keys) + '\n')
+        for c in curve_p:
             f.write('\t'.join(str(c[k]) for k in keys) + '\n')
 
     def agreeing(labels: Sequence[str], lo: int = 0) -> int:
@@ -211,6 +222,9 @@ def write_analysis(args: argparse.Namespace) -> int:
     last = curve[-1] if curve else None
     within = [c for c in curve if c['rows'] <= 40]
     at40 = within[-1] if within else None
+    last_p = curve_p[-1] if curve_p else None
+    within_p = [c for c in curve_p if c['rows'] <= 40]
+    at40_p = within_p[-1] if within_p else None
     statuses = {}
     for r in rows:
         statuses[(r['decision'], r['mission_status'])] = statuses.get((r['decision'], r['mission_status']), 0) + 1
@@ -241,6 +255,14 @@ def write_analysis(args: argparse.Namespace) -> int:
         f'| best static threshold, same rows (RTT < {_fmt(1000 * last["rule_rtt"], 0) if last else "–"} ms, '
         f'R_bw > {_fmt(last["rule_r_bw"], 2) if last else "–"}) | MALMOS: k-NN +10.9–40.5 points | '
         f'{acc(last, "static")} | {acc(last, "static_noise")} |',
+        f'| paired labels (one row per training pair, labelled by its oracle: `learning_curve_paired.tsv`): k-NN, '
+        f'all {last_p["rows"] if last_p else 0} rows | – | {acc(last_p, "knn")} | {acc(last_p, "knn_noise")} |',
+        f'| same, ≤ 40 rows ({at40_p["rows"] if at40_p else 0} rows) | goal ≥ 90 % | {acc(at40_p, "knn")} | '
+        f'{acc(at40_p, "knn_noise")} |',
+        f'| best static threshold on the paired rows (RTT < '
+        f'{_fmt(1000 * last_p["rule_rtt"], 0) if last_p else "–"} ms, R_bw > '
+        f'{_fmt(last_p["rule_r_bw"], 2) if last_p else "–"}) | – | {acc(last_p, "static")} | '
+        f'{acc(last_p, "static_noise")} |',
         '', '| measure | thesis | measured |', '|---|---|---|',
         f'| offloaded runs faster than CT / cheaper than CB | (thesis: above R_bw ≈ 4.9 / most runs) | '
         f'{sum(1 for v in y if v < control.ct_mean)} of {len(y)} / '
@@ -258,6 +280,10 @@ def write_analysis(args: argparse.Namespace) -> int:
         'Learning curve (learning_curve.tsv): ' + ', '.join(
             f'{c["rows"]} rows: k-NN {100 * c["knn"]:.0f} % / static {100 * c["static"]:.0f} % (noise-aware '
             f'{100 * c["knn_noise"]:.0f} % / {100 * c["static_noise"]:.0f} %)' for c in curve),
+        '',
+        'Learning curve, paired labels (learning_curve_paired.tsv): ' + ', '.join(
+            f'{c["rows"]} rows: k-NN {100 * c["knn"]:.0f} % / static {100 * c["static"]:.0f} % (noise-aware '
+            f'{100 * c["knn_noise"]:.0f} % / {100 * c["static_noise"]:.0f} %)' for c in curve_p),
         '',
         'Figures: fig5_1_decision_map.png, fig5_2_time_vs_rbw.png, fig5_3_operating_time.png, '
         'fig5_4_time_vs_rtt.png, fig5_5_battery.png, fig5_6_time.png.',

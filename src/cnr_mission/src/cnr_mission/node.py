@@ -152,7 +152,9 @@ class MissionMonitor:
         """The decision before the task (in a thread: the monitor goes on reporting meanwhile)."""
         try:
             rospy.wait_for_service(f'{self.decider}/decide', 300.0)
-            res = rospy.ServiceProxy(f'{self.decider}/decide', Decide)(self.decision_task, self.name, '', True, True)
+            res = rospy.ServiceProxy(f'{self.decider}/decide', Decide)(
+                task=self.decision_task, location=self.name, force='', probe=True, explore=True, settle=0.0,
+                reuse_profile=False)
             self._say(f'network-aware: {self.decision_task}@{self.name}: ' + res.message)
         except (rospy.ROSException, rospy.ServiceException) as exc:
             if not rospy.is_shutdown():

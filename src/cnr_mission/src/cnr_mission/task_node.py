@@ -2,8 +2,9 @@
 one after the other, each under the link the plan sets, decided and evaluated by network_monitor's
 migration_decider (see :mod:`cnr_mission.core.task` and the package README).
 
-Per run: set the link (testbed emulator), let the network monitor's window fill (``settle``), put the robot at
-the task's start (the simulator's ``teleport``), ``~decide`` (profile, k-NN, placement), drive the goals with
+Per run: set the link (testbed emulator), put the robot at the task's start (the simulator's ``teleport``),
+``~decide`` (the modules home, the network monitor's window filled with the new link for ``settle`` s, profile,
+k-NN, placement; or the previous run's profile with ``reuse_profile``), drive the goals with
 move_base's action, measure T_task (sim time) and B_task (battery_state), ``~evaluate``, append the row to
 the results file. A plan that was interrupted resumes after the last run with a row.
 
@@ -128,8 +129,11 @@ class TaskRunner:
             f'RTT {r.link.rtt_ms:.0f} ms, {r.link.rate:g} Mbit/s, loss {100 * r.link.loss:.1f} %'
         self.say(f'run {i}/{n} {r.id}: {link or "link as it is"}'
                  + (f'; placement forced: {force}' if force else ''))
-        if r.link != self.link:             # a new link: let the monitor's window fill with it
-            deadline = time.monotonic() + self.plan.settle
+        # a new link: the monitor's window fills with it before the profile (the decider waits, counting the time
+        # it spends bringing the modules home; without a decision the runner waits)
+        settle = self.plan.settle if r.link != self.link else 0.0
+        if not r.decide:
+            deadline = time.monotonic() + settle
             while time.monotonic() < deadline and not rospy.is_shutdown():
                 time.sleep(0.1)
         self.link = r.link
@@ -141,7 +145,8 @@ class TaskRunner:
         self.redecisions = []
         if r.decide:
             self.decide.wait_for_service(self.decide_timeout)
-            d = self.decide(self.plan.task, self.plan.location, force, True, r.explore)
+            d = self.decide(task=self.plan.task, location=self.plan.location, force=force, probe=True,
+                            explore=r.explore, settle=settle, reuse_profile=r.reuse_profile)
             if not d.ok:
                 raise RuntimeError(f'the decider refused: {d.message}')
             self.say(f'decision: {d.message}')

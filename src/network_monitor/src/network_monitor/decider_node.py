@@ -46,6 +46,8 @@ class DeciderNode:
         d = f.section('decider')
         self.service_timeout = d.number('service_timeout', positive=True)
         self.placement_timeout = d.number('placement_timeout', positive=True)
+        self.profile_at_home = d.boolean('profile_at_home')
+        self.last_profile: Optional[Tuple[Profile, str]] = None     # the previous ~decide's profile and its note
         self.advisor = TaskAdvisor(self.cfg)
         self.lock = threading.Lock()
         self.active: Dict[str, str] = {}               # module -> host where active (from the manager)
@@ -150,7 +152,26 @@ class DeciderNode:
         out.header.stamp = rospy.Time.now()
         return out
 
-    def _on_decide(self, req) -> DecideResponse:
+    def _profile(self, req) -> Tuple[Profile, str]:
+        """The profile a ~decide decides on, and a note for its message (module docstring of the package README,
+        "Node migration_decider"): the previous one (``reuse_profile``), or a new one taken with the task's modules
+        on the robot (``decider.profile_at_home``) no earlier than ``settle`` s after the request."""
+        if req.reuse_profile and self.last_profile is not None:
+            profile, note = self.last_profile
+            return profile, note + 'the previous profile: '
+        t0 = time.monotonic()
+        home_note, note = '', ''
+        if self.profile_at_home and req.task in self.cfg.tasks:
+            home = self.advisor.hosts(req.task, ONLOAD)
+            with self.lock:
+                away = [m for m, h in home.items() if self.active.get(m, h) != h]
+            if away:        # their traffic (a cloud move_base is sent the laser scans) would load the link measured
+                placed, moved, message = self.place(home)
+                home_note = f'brought home first ({message}; {time.monotonic() - t0:.1f} s): '
+                if not placed:
+                    rospy.logwarn(f'migration_decider: {home_note}')
+        while not rospy.is_shutdown() and time.monotonic() - t0 < req.settle:
+            time.sleep(0.1)
         try:
             res = self.profile_now(req.probe) if self._wait(self.profile_now) else None
         except (rospy.ServiceException, rospy.ROSException) as exc:
@@ -158,10 +179,15 @@ class DeciderNode:
             rospy.logwarn(f'migration_decider: no profile from the network monitor: {exc}')
         if res is None:
             profile = Profile(math.nan, math.nan, math.nan, math.nan, 'none', alive=False)
-            note = 'no profile (network monitor not answering): '
+            note += 'no profile (network monitor not answering): '
         else:
             profile = profile_of(res.profile)
-            note = '' if res.success else f'probe failed ({res.message}): '
+            note += '' if res.success else f'probe failed ({res.message}): '
+        self.last_profile = (profile, note)
+        return profile, home_note + note
+
+    def _on_decide(self, req) -> DecideResponse:
+        profile, note = self._profile(req)
         with self.lock:
             try:
                 d, hosts, warnings = self.advisor.begin(req.task, req.location, profile, time.monotonic(),

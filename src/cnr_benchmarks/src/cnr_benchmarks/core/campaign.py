@@ -5,9 +5,16 @@ Conditions. RTT uniform in [rtt_min, rtt_max] ms, rate log-uniform in [rate_min,
 decades; uniform would put nine in ten draws above 5 Mbit/s), loss uniform in [loss_min, loss_max]; one
 ``random.Random(seed)``, so a seed gives the same conditions.
 
-Paired runs. Each condition is run twice: first as the migration_decider decides (the robot's own decision, as
-in the thesis), then with the other placement (``force: other``). The pair gives the *oracle*: the placement
-with the better Eq. 4-5 value (evaluation.better_placement). Both runs are evaluated and learned. Two runs of
+Paired runs. Each condition is run twice, onload first, then offload, both decided by the migration_decider on
+one profile: the first run brings move_base home, lets the new link fill the monitor's window, profiles it and
+records what the robot's policy decides (k-NN, or the cold-start rule while the set is small: its ``policy``,
+the *decision* of the condition), then runs onload; the second reuses that profile and runs offload. The pair
+gives the *oracle*: the placement with the better Eq. 4-5 value (evaluation.better_placement). Both runs are
+evaluated and learned, so both placements get data in every condition (no exploration is needed). Why this
+order: a profile taken while move_base runs on the cloud measures its own laser-scan stream on the link, and an
+onload run just after a cloud -> robot migration starts with the clone still warming up under the robot's CPU
+cap (both seen in the first campaign, whose plans ran the decided placement first and then ``force: other``;
+:func:`pairs` reads both kinds of results). Two runs of
 the same placement differ too (the control runs' sd), so the analysis also reports a *noise-aware* oracle: a pair
 whose two values differ by no more than :func:`noise_tolerance` (what run-to-run noise alone gives, 95 %) is
 EITHER, and any decision is right for it; the strict oracle (tolerance 0) always names a winner.
@@ -64,14 +71,14 @@ def draw_conditions(n: int, seed: int, r: Ranges, first: int = 1) -> List[Condit
 
 
 def plan_document(task: str, location: str, settle: float, conditions: Sequence[Condition]) -> Dict:
-    """The task_runner's plan: per condition the decided run, then the other placement (module docstring)."""
+    """The task_runner's plan: per condition an onload run on a new profile, then an offload run on the same
+    profile (module docstring)."""
     runs = []
     for c in conditions:
         link = dict(delay=c.rtt_ms / 2.0, rate=c.rate, loss=c.loss)
-        runs.append(dict(id=f'{c.id}-decided', condition=c.id, link=link, force='', decide=True, learn=True,
-                         explore=True))
-        runs.append(dict(id=f'{c.id}-other', condition=c.id, link=link, force='other', decide=True, learn=True,
-                         explore=False))
+        for placement, reuse in ((ONLOAD, False), (OFFLOAD, True)):
+            runs.append(dict(id=f'{c.id}-{placement}', condition=c.id, link=link, force=placement, decide=True,
+                             learn=True, explore=False, reuse_profile=reuse))
     return dict(task=task, location=location, settle=settle, runs=runs)
 
 
@@ -79,7 +86,7 @@ def control_plan(task: str, location: str, settle: float, runs: int) -> Dict:
     """The control experiment: ``runs`` runs with every module on the robot, no decision (thesis Table 4-5)."""
     return dict(task=task, location=location, settle=settle,
                 runs=[dict(id=f'control-{i:02d}', condition=f'control-{i:02d}', force='', decide=False, learn=False,
-                           explore=False)
+                           explore=False, reuse_profile=False)
                       for i in range(1, runs + 1)])
 
 
@@ -97,10 +104,10 @@ class Pair:
     rtt_ms: float
     rate: float
     loss: float
-    c_l: float              # the decided run's profile
+    c_l: float              # the condition's profile (its first run's)
     r_bw: float
-    decided: str            # what the robot decided
-    reason: str
+    decided: str            # what the robot decided (the first run's decision, or its policy when forced)
+    reason: str             # knn | cold_start | explore | no_profile
     offload: Outcome
     onload: Outcome
     offload_row: Dict[str, str]
@@ -111,22 +118,35 @@ def outcome(row: Dict[str, str]) -> Outcome:
     return Outcome(t_task=_f(row, 't_task'), b_task=_f(row, 'b_task'), mission_status=row['mission_status'])
 
 
-def pairs(rows: Sequence[Dict[str, str]]) -> List[Pair]:
-    """The conditions with both runs finished, in order."""
-    by: Dict[str, Dict[str, Dict[str, str]]] = {}
-    order: List[str] = []
+def pairs(rows: Sequence[Dict[str, str]], k: int = 5) -> List[Pair]:
+    """The conditions with both placements finished, in order. The condition's decision is its first run's:
+    the decision it ran, or when that run was forced (this campaign's onload-first plans) the policy it
+    recorded, made by k-NN once ``k`` rows with a usable profile had been learned, by the cold-start rule
+    before."""
+    by: Dict[str, List[Dict[str, str]]] = {}
+    learned_before: Dict[str, int] = {}
+    learned = 0
     for r in rows:
         if r['condition'] not in by:
-            order.append(r['condition'])
-        by.setdefault(r['condition'], {})[r['id'].rsplit('-', 1)[-1]] = r
+            by[r['condition']] = []
+            learned_before[r['condition']] = learned
+        by[r['condition']].append(r)
+        if r.get('learned') == '1':
+            learned += 1
     out = []
-    for c in order:
-        d, o = by[c].get('decided'), by[c].get('other')
-        if d is None or o is None or {d['decision'], o['decision']} != {OFFLOAD, ONLOAD}:
+    for c, runs in by.items():
+        placed = {r['decision']: r for r in runs if r['decision'] in (OFFLOAD, ONLOAD)}
+        if set(placed) != {OFFLOAD, ONLOAD}:
             continue
-        off, on = (d, o) if d['decision'] == OFFLOAD else (o, d)
-        out.append(Pair(c, _f(d, 'rtt_ms'), _f(d, 'rate_mbit'), _f(d, 'loss'), _f(d, 'c_l'), _f(d, 'r_bw'),
-                        d['decision'], d['reason'], outcome(off), outcome(on), off, on))
+        first, off, on = runs[0], placed[OFFLOAD], placed[ONLOAD]
+        if first.get('force'):
+            decided = first['policy']
+            reason = ('no_profile' if not math.isfinite(_f(first, 'c_l')) or not math.isfinite(_f(first, 'r_bw'))
+                      else 'knn' if learned_before[c] >= k else 'cold_start')
+        else:
+            decided, reason = first['decision'], first['reason']
+        out.append(Pair(c, _f(first, 'rtt_ms'), _f(first, 'rate_mbit'), _f(first, 'loss'), _f(first, 'c_l'),
+                        _f(first, 'r_bw'), decided, reason, outcome(off), outcome(on), off, on))
     return out
 
 
@@ -172,6 +192,23 @@ def static_rule_fit(rows: Sequence[Row]) -> Tuple[float, float]:
 
 def static_rule(a: float, b: float, c_l: float, r_bw: float) -> str:
     return OFFLOAD if c_l < a and r_bw > b else ONLOAD
+
+
+def paired_rows(pairs: Sequence[Pair], labels: Sequence[str]) -> List[Row]:
+    """One training row per pair at its profile, labelled with the pair's oracle (``labels``, strict): what a
+    robot that ran both placements under the link learns from comparing them, instead of judging each run alone
+    against the control values (the thesis's V_r rule, which labels a good offload run offload and a good onload
+    run onload under the same link). Pairs without a usable profile are left out."""
+    out = []
+    for p, label in zip(pairs, labels):
+        if not (math.isfinite(p.c_l) and math.isfinite(p.r_bw)):
+            continue
+        run = p.offload if label == OFFLOAD else p.onload
+        out.append(Row(r_bw=p.r_bw, c_l=p.c_l, decision=label, mission_status=run.mission_status,
+                       b_task=run.b_task, t_task=run.t_task, timestamp=0.0, task='', location='',
+                       placement='', rtt_spread=math.nan, loss=math.nan, profile_method='', value=math.nan,
+                       good=True, label=label, explored=False, source='paired'))
+    return out
 
 
 def learning_curve(rows: Sequence[Row], train_conditions: int, held_out: Sequence[Pair], oracle_labels: Sequence[str],

@@ -6,7 +6,7 @@ B_task. Its definition lives in the location's scenario file (config/scenarios/<
     tasks:
       corridor_round_trip:               # the thesis's task: to the end of the corridor and back
         start: [0.5, 0.0, 0.0]           # m, m, rad: the robot is put here before each run
-        goals: [[6.0, 0.0, 0.0], [0.5, 0.0, 3.14159]]   # move_base goals in the map frame, in order
+        goals: [[4.5, 0.0, 0.0], [0.5, 0.0, 3.14159]]   # move_base goals in the map frame, in order
         goal_timeout: 90.0               # s of sim time per goal before the task counts as timed out
 
 Mission status (the thesis never defines it; :func:`mission_status`): ``completed`` when move_base reached
@@ -17,7 +17,8 @@ A *plan* (YAML) lists runs for the ``task_runner`` node; each has an id, the lin
 and what to decide (``force``: '' = the migration_decider decides, offload | onload = that placement;
 ``other`` = the other placement than the previous run of the same condition ran, for paired runs;
 ``decide: false`` = no decider at all, e.g. the control runs; ``learn``: append the evaluated row to the
-training set; ``explore``: the decision may explore). Results are appended to a TSV, one row per run,
+training set; ``explore``: the decision may explore; ``reuse_profile``: decide on the previous run's profile,
+e.g. the second run of a pair under the same link). Results are appended to a TSV, one row per run,
 so a plan that was interrupted resumes after its last finished run (:func:`read_results`).
 """
 from __future__ import annotations
@@ -103,6 +104,7 @@ class RunSpec:
     decide: bool            # ask the migration_decider (False: run as placed, no evaluation)
     learn: bool             # the decider appends the evaluated row to the training set
     explore: bool           # the decision may explore (False: the k-NN's or the rule's choice)
+    reuse_profile: bool     # decide on the previous run's profile (paired runs under one link)
 
 
 @dataclass(frozen=True)
@@ -135,7 +137,8 @@ def load_plan(path: str) -> Plan:
             raise r.error('force', 'other needs an earlier run of the same condition')
         link = _link(r.section('link')) if r.raw('link', None) is not None else None
         runs.append(RunSpec(id=rid, condition=r.string('condition'), link=link, force=force,
-                            decide=r.boolean('decide'), learn=r.boolean('learn'), explore=r.boolean('explore')))
+                            decide=r.boolean('decide'), learn=r.boolean('learn'), explore=r.boolean('explore'),
+                            reuse_profile=r.boolean('reuse_profile')))
     if not runs:
         raise s.error('runs', 'expected at least one run')
     return Plan(task=s.string('task'), location=s.string('location'), settle=s.number('settle', nonnegative=True),
