@@ -229,6 +229,17 @@ def write_analysis(args: argparse.Namespace) -> int:
     for r in rows:
         statuses[(r['decision'], r['mission_status'])] = statuses.get((r['decision'], r['mission_status']), 0) + 1
     wall = sum(_num(r, 'wall_time') for r in rows if math.isfinite(_num(r, 'wall_time')))
+    # where a paired condition's wall-clock time goes (runs with a decision: the task, placing, the rest)
+    def med(v: Sequence[float]) -> float:
+        v = [a for a in v if math.isfinite(a)]
+        return statistics.median(v) if v else math.nan
+    pair_wall = med([_num(p.offload_row, 'wall_time') + _num(p.onload_row, 'wall_time') for p in pairs])
+    budget = (f'Per paired condition (median over {len(pairs)}): {_fmt(pair_wall)} s of wall-clock time, i.e. 100 '
+              f'conditions in {_fmt(100 * pair_wall / 3600, 2)} h; onload run {_fmt(med([_num(r, "wall_time") for r in onload_rows]))} s '
+              f'(task {_fmt(med([_num(r, "t_task") for r in onload_rows]))} s), offload run '
+              f'{_fmt(med([_num(r, "wall_time") for r in offload_rows]))} s (task '
+              f'{_fmt(med([_num(r, "t_task") for r in offload_rows]))} s, placing '
+              f'{_fmt(med([_num(r, "placing_time") for r in offload_rows]))} s).\n')
     def pct(k: int, n: int) -> str:
         return f'{k}/{n} ({_fmt(100 * k / max(n, 1), 0)} %)'
 
@@ -239,6 +250,7 @@ def write_analysis(args: argparse.Namespace) -> int:
         f'`launch_scripts/exp_campaign.sh {" ".join(args.argv)}`: {len(rows)} runs, {len(pairs)} paired conditions '
         f'({n_train} training, {n_test} held out), {wall / 3600:.2f} h of runs; control values: CT '
         f'{control.ct_mean:.2f} s, CB {control.cb_mean:.6f} ({control.runs} runs, {control.date}).\n',
+        budget,
         'Runs by placement and status: ' + ', '.join(f'{d} {s}: {n}' for (d, s), n in sorted(statuses.items()))
         + '\n',
         f'Oracle: strict = the pair\'s lower Eq. 4-5 value wins; noise-aware = a pair whose two values differ by '
