@@ -153,9 +153,10 @@ class DeciderNode:
         return out
 
     def _profile(self, req) -> Tuple[Profile, str]:
-        """The profile a ~decide decides on, and a note for its message (module docstring of the package README,
-        "Node migration_decider"): the previous one (``reuse_profile``), or a new one taken with the task's modules
-        on the robot (``decider.profile_at_home``) no earlier than ``settle`` s after the request."""
+        """The profile a ~decide decides on, and a note for its message (the package README, "Node
+        migration_decider"): the previous one (``reuse_profile``), or a new one taken with the task's modules on
+        the robot (``decider.profile_at_home``) no earlier than ``settle`` s after the request or, when modules
+        were brought home, after they were (their traffic filled the link's queue until then)."""
         if req.reuse_profile and self.last_profile is not None:
             profile, note = self.last_profile
             return profile, note + 'the previous profile: '
@@ -168,6 +169,7 @@ class DeciderNode:
             if away:        # their traffic (a cloud move_base is sent the laser scans) would load the link measured
                 placed, moved, message = self.place(home)
                 home_note = f'brought home first ({message}; {time.monotonic() - t0:.1f} s): '
+                t0 = time.monotonic()   # their traffic may still be queued on the link: the window fills anew
                 if not placed:
                     rospy.logwarn(f'migration_decider: {home_note}')
         while not rospy.is_shutdown() and time.monotonic() - t0 < req.settle:
