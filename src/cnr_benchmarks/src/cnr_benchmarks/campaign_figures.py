@@ -255,7 +255,9 @@ def write_analysis(args: argparse.Namespace) -> int:
         + '\n',
         f'Oracle: strict = the pair\'s lower Eq. 4-5 value wins; noise-aware = a pair whose two values differ by '
         f'≤ {tolerance:.3f} (two runs\' 95 % spread by the control runs\' sd) is "either" and any decision is right '
-        f'for it: {either} of {len(pairs)} pairs.\n',
+        f'for it: {either} of {len(pairs)} pairs. Offload was the better placement in '
+        f'{sum(1 for o in oracle if o == OFFLOAD)} of {len(pairs)} pairs strictly, in '
+        f'{sum(1 for o in oracle_noise if o == OFFLOAD)} beyond the noise.\n',
         '| measure | thesis | measured: strict oracle | noise-aware oracle |', '|---|---|---|---|',
         f'| decisions the oracle agrees with, all conditions (online, as learned) | – | {pct(online, len(pairs))} | '
         f'{pct(online_n, len(pairs))} |',
