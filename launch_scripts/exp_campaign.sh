@@ -1,12 +1,12 @@
 #!/usr/bin/env bash
 # exp_campaign.sh — the continuous experiment of thesis §5 (issue 12): --conditions link conditions (default
 # 100; RTT 0-200 ms, rate 0.5-50 Mbit/s log-uniform, loss 0-5 %, drawn with --seed) on the two-host testbed, each
-# run twice: as network_monitor's migration_decider decides (profile, k-NN, migration of move_base), then with
-# the other placement; both evaluated (Eq. 4-5) and learned from an empty training set. Then the analysis: the
-# decisions against the oracle of the paired runs, the learning curve beside the best static threshold, and
-# Figures 5-1 to 5-6 beside the thesis's numbers (bench_results/campaign/campaign.md). Needs the control values
+# profiled once with move_base on the robot and decided by network_monitor's migration_decider (k-NN), then run
+# onload and offload on that profile; both runs evaluated (Eq. 4-5) and learned from an empty training set.
+# Then the analysis: the decisions against the oracle of the paired runs, the learning curve beside the best
+# static threshold, and Figures 5-1 to 5-6 beside the thesis's numbers (bench_results/campaign/campaign.md). Needs the control values
 # (exp_control.sh) and root; uses the default testbed. Rows are appended as measured; run it again to resume.
-# About 75 s per condition.
+# About 80 s per condition (median 79 s, 2026-11-26).
 #
 #   launch_scripts/exp_campaign.sh [--conditions 100] [--seed 1] [--out DIR] [--test-fraction 0.3]
 #                                  [--rtt-min 0 --rtt-max 200 --rate-min 0.5 --rate-max 50 --loss-min 0
