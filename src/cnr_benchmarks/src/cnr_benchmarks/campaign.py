@@ -18,9 +18,10 @@ missions (placement all_robot, the modules run by migration agents as in the mai
 and B_task the battery used until then (the mission report's ``task``); each run in ``<out>/runs/NN``.
 
 ``campaign``: ``--conditions`` link conditions drawn with ``--seed`` (cnr_benchmarks.core.campaign), each
-profiled once with the modules on the robot, decided by the robot's policy and run onload then offload; the robot's training set starts empty in
-``<out>/training`` (cold start, exploration, k-NN as it learns). Then ``analyse``: the learning curve against
-the oracle beside the best static threshold, and Figures 5-1 to 5-6 in ``<out>/``, with campaign.md.
+profiled once with the modules on the robot, decided by the robot's policy and run onload then offload; the
+robot's training set starts empty in ``<out>/training`` (cold start, then k-NN as it learns). Then
+``analyse``: the learning curve against the oracle beside the best static threshold, and Figures 5-1 to 5-6 in
+``<out>/``, with campaign.md.
 """
 from __future__ import annotations
 

@@ -234,12 +234,12 @@ def write_analysis(args: argparse.Namespace) -> int:
         v = [a for a in v if math.isfinite(a)]
         return statistics.median(v) if v else math.nan
     pair_wall = med([_num(p.offload_row, 'wall_time') + _num(p.onload_row, 'wall_time') for p in pairs])
+    def med_of(rs: Sequence[Dict[str, str]], key: str) -> str:
+        return _fmt(med([_num(r, key) for r in rs]))
     budget = (f'Per paired condition (median over {len(pairs)}): {_fmt(pair_wall)} s of wall-clock time, i.e. 100 '
-              f'conditions in {_fmt(100 * pair_wall / 3600, 2)} h; onload run {_fmt(med([_num(r, "wall_time") for r in onload_rows]))} s '
-              f'(task {_fmt(med([_num(r, "t_task") for r in onload_rows]))} s), offload run '
-              f'{_fmt(med([_num(r, "wall_time") for r in offload_rows]))} s (task '
-              f'{_fmt(med([_num(r, "t_task") for r in offload_rows]))} s, placing '
-              f'{_fmt(med([_num(r, "placing_time") for r in offload_rows]))} s).\n')
+              f'conditions in {_fmt(100 * pair_wall / 3600, 2)} h; onload run {med_of(onload_rows, "wall_time")} s '
+              f'(task {med_of(onload_rows, "t_task")} s), offload run {med_of(offload_rows, "wall_time")} s (task '
+              f'{med_of(offload_rows, "t_task")} s, placing {med_of(offload_rows, "placing_time")} s).\n')
     def pct(k: int, n: int) -> str:
         return f'{k}/{n} ({_fmt(100 * k / max(n, 1), 0)} %)'
 

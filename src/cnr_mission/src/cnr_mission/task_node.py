@@ -129,8 +129,8 @@ class TaskRunner:
             f'RTT {r.link.rtt_ms:.0f} ms, {r.link.rate:g} Mbit/s, loss {100 * r.link.loss:.1f} %'
         self.say(f'run {i}/{n} {r.id}: {link or "link as it is"}'
                  + (f'; placement forced: {force}' if force else ''))
-        # a new link: the monitor's window fills with it before the profile (the decider waits, counting the time
-        # it spends bringing the modules home; without a decision the runner waits)
+        # a new link: the monitor's window fills with it before the profile (the decider waits, after bringing
+        # the modules home if it does; without a decision the runner waits)
         settle = self.plan.settle if r.link != self.link else 0.0
         if not r.decide:
             deadline = time.monotonic() + settle

@@ -7,8 +7,8 @@ Features. A network profile (C_l = RTT [s], R_bw = A_bw / C_bw) becomes a point 
 
 Both axes run 0..1, so Eq. 4-3's Euclidean distance weighs latency and bandwidth alike (the thesis normalised
 and chose R_bw's direction for the same reason, §4.2.4). R_bw is compared on a log scale: it is a ratio that
-spans decades (an idle link gives A_bw / c_bw_floor: up to 250 on a 50 Mbit/s link), and what matters is the factor of
-headroom — 2 vs 4 is as different as 50 vs 100, while 200 vs 20000 are both "plenty". Beyond the clips every
+spans decades (an idle link gives A_bw / c_bw_floor: up to 250 on a 50 Mbit/s link), and what matters is the
+factor of headroom — 2 vs 4 is as different as 50 vs 100, while 200 vs 2000 are both "plenty". Beyond the clips every
 value is equally bad (RTT >= rtt_max, R_bw <= r_bw_min: the link is saturated) or equally good
 (R_bw >= r_bw_max).
 
