@@ -309,6 +309,8 @@ def test_a_failover_recovers_from_the_merger_what_no_instance_received(lmm, ros,
     merger = ros.master.run(['rosrun', 'merger', 'merger'], 'merger')
     feed = Feed()
     try:
+        # The feed hears the merger before A subscribes, so no store can hold a measurement the feed missed.
+        wait_until(lambda: feed.count() >= 1, 30, 'the merger to publish')
         proc_a = start('robot')
         driver.promote(host='robot')
         driver.wait_active(10, host='robot')
