@@ -10,9 +10,14 @@ from typing import Any, List, Mapping, Optional, Sequence
 from cnr_harness.process import Proc, free_port, wait_until
 
 
+def master_proxy(uri: str, timeout: float) -> xmlrpc.client.ServerProxy:
+    """An XML-RPC proxy of the master (or any node) at ``uri`` whose calls give up after ``timeout`` seconds."""
+    return xmlrpc.client.ServerProxy(uri, transport=_TimeoutTransport(timeout))
+
+
 def master_answers(uri: str, caller: str = '/cnr_harness', timeout: float = 1.0) -> bool:
     """Whether a ROS master answers ``getPid`` at ``uri`` within ``timeout`` seconds."""
-    proxy = xmlrpc.client.ServerProxy(uri, transport=_TimeoutTransport(timeout))
+    proxy = master_proxy(uri, timeout)
     try:
         return proxy.getPid(caller)[0] == 1
     except (OSError, xmlrpc.client.Error):

@@ -172,8 +172,9 @@ class CostmapROS:
                            {f.name: (f.offset, f.datatype) for f in cloud.fields}, cloud.is_bigendian)
         return [cloud_to_observation(points, found[0], found[1], params.layer, self.costmap.cfg.resolution, origin)]
 
-    def sensors_current(self) -> bool:
-        """costmap_2d's ``isCurrent``: every source with an expected rate sent a scan recently."""
+    def sensors_current(self, warn: bool = True) -> bool:
+        """costmap_2d's ``isCurrent``: every source with an expected rate sent a scan recently (``warn``: say
+        which one did not, at most every 5 s)."""
         now = rospy.Time.now()
         for src in self.sources:
             rate = src.params.expected_update_rate
@@ -181,9 +182,10 @@ class CostmapROS:
                 continue
             last = src.last_time()
             if last is None or (now - last).to_sec() > rate:
-                rospy.logwarn_throttle(5.0, f'The {src.params.name} observation buffer has not been updated for '
-                                            f'{(now - last).to_sec() if last else float("inf"):.2f} seconds, and it '
-                                            f'should be updated every {rate:.2f} seconds.')
+                if warn:
+                    rospy.logwarn_throttle(5.0, f'The {src.params.name} observation buffer has not been updated '
+                                                f'for {(now - last).to_sec() if last else float("inf"):.2f} seconds, '
+                                                f'and it should be updated every {rate:.2f} seconds.')
                 return False
         return True
 

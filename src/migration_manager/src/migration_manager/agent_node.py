@@ -1,9 +1,10 @@
 """``migration_agent``: starts and stops the managed module instances of one host (see the package README).
 
-One per host, on that host's master. It only starts modules in its configured list, each as a *standby*
-(``cnr_launch <launch_package> <launch_file> <module>:=true migration_role:=standby ...``, normally
-cnr_mission modules.launch, its own process group,
-output in ``<log_dir>/<host>-<module>-<n>.log``); promotion and freezing are the manager's business with the instance
+One per host, on that host's master. It only starts modules in its configured list, each as a *standby*: the
+node that ``<launch_package> <launch_file> <module>:=true migration_role:=standby ...`` (normally cnr_mission
+modules.launch) launches, resolved once at start-up with roslaunch's loader and started directly, without a
+launch parent per instance (:mod:`migration_manager.instance_launch`): its parameters set on the master, then
+its process, in its own process group, output in ``<log_dir>/<host>-<module>-<n>.log``; promotion and freezing are the manager's business with the instance
 itself. An instance that exits while it is wanted here (crashed, or superseded after an outage) is started
 again as a standby after ``restart_delay``.
 """
@@ -15,6 +16,7 @@ import time
 from dataclasses import dataclass
 from typing import Dict, List, Optional
 
+import rosgraph
 import rospy
 
 import cnr_params
@@ -24,6 +26,7 @@ from cnr_msgs.srv import AgentCommand, AgentCommandResponse
 from cnr_params.config import EXIT_CONFIG
 from cnr_params.ros import init_node, private_section
 from migration_manager.core.config import from_section
+from migration_manager.instance_launch import LaunchError, NodeLaunch, resolve
 
 
 @dataclass
@@ -49,7 +52,14 @@ class Agent:
         if not isinstance(launch_args, dict):
             raise p.error('launch_args', f'must be a mapping of modules.launch arguments, got {launch_args!r}')
         self.launch_args = {str(k): str(v) for k, v in launch_args.items()}
-        self.launch = (p.string('launch_package'), p.string('launch_file'))
+        launch = (p.string('launch_package'), p.string('launch_file'))
+        self.master_uri = rosgraph.get_master_uri()
+        self.launches: Dict[str, NodeLaunch] = {}
+        for module in self.cfg.modules:
+            try:
+                self.launches[module] = resolve(*launch, module, self._args(module), self.master_uri)
+            except LaunchError as exc:
+                raise p.error('launch_file', str(exc)) from None
         self.log_dir = self.cfg.log_dir
         os.makedirs(self.log_dir, exist_ok=True)
         self.lock = threading.Lock()
@@ -59,15 +69,22 @@ class Agent:
         rospy.Service(f'{base}/command', AgentCommand, self._on_command)
         rospy.loginfo(f'migration_agent on {self.host}: modules {", ".join(self.cfg.modules)}; logs in {self.log_dir}')
 
-    def _argv(self, module: str) -> List[str]:
-        args = [f'{k}:={v}' for k, v in sorted(self.launch_args.items())]
-        return ['rosrun', 'cnr_bringup', 'cnr_launch', *self.launch, f'{module}:=true',
-                'migration_role:=standby', f'migration_host:={self.host}'] + args
+    def _args(self, module: str) -> List[str]:
+        """The launch arguments of ``module``'s instances."""
+        return [f'{module}:=true', 'migration_role:=standby', f'migration_host:={self.host}'] + \
+            [f'{k}:={v}' for k, v in sorted(self.launch_args.items())]
 
     def _start(self, slot: Slot) -> None:
         slot.started += 1
         log = os.path.join(self.log_dir, f'{self.host}-{slot.module}-{slot.started}.log')
-        slot.proc = Proc(self._argv(slot.module), log)
+        launch = self.launches[slot.module]
+        try:
+            launch.set_params(self.master_uri, self.cfg.control_call)
+        except (OSError, LaunchError) as exc:       # the master not answering: tried again after restart_delay
+            slot.proc, slot.exited_at, slot.last_code = None, time.monotonic(), None
+            rospy.logwarn(f'{slot.module}: not started, its parameters could not be set: {exc}')
+            return
+        slot.proc = Proc(launch.argv, log, env=launch.env)
         slot.last_pid = slot.proc.pid
         slot.exited_at = None
         rospy.loginfo(f'{slot.module}: started a standby (pid {slot.proc.pid}, log {log})')
@@ -84,9 +101,10 @@ class Agent:
                 # fresh standby on the old host) starts a new one; the old one goes on stopping
                 if slot.proc is None or not slot.proc.alive() or slot.proc is slot.stopping:
                     self._start(slot)
-                pid = slot.proc.pid
+                pid = slot.proc.pid if slot.proc is not None else 0
             self._health()
-            return AgentCommandResponse(ok=True, message='running', pid=pid)
+            return AgentCommandResponse(ok=True, message='running' if pid else 'starting (its parameters could '
+                                        'not be set yet)', pid=pid)
         if req.command == 'stop':
             with self.lock:
                 slot.wanted = False
