@@ -141,6 +141,10 @@ def world(ros):
     driver.close()
     rec.close()
     ros.master.stop_child(sim)
+    try:                    # the instances' parameters (migration/role: standby) would make a later move_base a standby
+        ros.master.call('deleteParam', '/move_base')
+    except RuntimeError:    # none set
+        pass
 
 
 @pytest.fixture

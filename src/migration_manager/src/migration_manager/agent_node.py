@@ -2,8 +2,8 @@
 
 One per host, on that host's master. It only starts modules in its configured list, each as a *standby*: the
 node that ``<launch_package> <launch_file> <module>:=true migration_role:=standby ...`` (normally cnr_mission
-modules.launch) launches, resolved once at start-up with roslaunch's loader and started directly, without a
-launch parent per instance (:mod:`migration_manager.instance_launch`): its parameters set on the master, then
+modules.launch) launches, resolved with roslaunch's loader (checked at start-up, again for each instance) and
+started directly, without a launch parent per instance (:mod:`migration_manager.instance_launch`): its parameters set on the master, then
 its process, in its own process group, output in ``<log_dir>/<host>-<module>-<n>.log``; promotion and freezing are the manager's business with the instance
 itself. An instance that exits while it is wanted here (crashed, or superseded after an outage) is started
 again as a standby after ``restart_delay``.
@@ -52,12 +52,11 @@ class Agent:
         if not isinstance(launch_args, dict):
             raise p.error('launch_args', f'must be a mapping of modules.launch arguments, got {launch_args!r}')
         self.launch_args = {str(k): str(v) for k, v in launch_args.items()}
-        launch = (p.string('launch_package'), p.string('launch_file'))
+        self.launch = (p.string('launch_package'), p.string('launch_file'))
         self.master_uri = rosgraph.get_master_uri()
-        self.launches: Dict[str, NodeLaunch] = {}
-        for module in self.cfg.modules:
+        for module in self.cfg.modules:          # a launch that cannot start a module is a configuration error now
             try:
-                self.launches[module] = resolve(*launch, module, self._args(module), self.master_uri)
+                self._resolve(module)
             except LaunchError as exc:
                 raise p.error('launch_file', str(exc)) from None
         self.log_dir = self.cfg.log_dir
@@ -74,15 +73,18 @@ class Agent:
         return [f'{module}:=true', 'migration_role:=standby', f'migration_host:={self.host}'] + \
             [f'{k}:={v}' for k, v in sorted(self.launch_args.items())]
 
+    def _resolve(self, module: str) -> NodeLaunch:
+        return resolve(*self.launch, module, self._args(module), self.master_uri)
+
     def _start(self, slot: Slot) -> None:
         slot.started += 1
         log = os.path.join(self.log_dir, f'{self.host}-{slot.module}-{slot.started}.log')
-        launch = self.launches[slot.module]
         try:
+            launch = self._resolve(slot.module)     # the configuration as it is now, as roslaunch would read it
             launch.set_params(self.master_uri, self.cfg.control_call)
-        except (OSError, LaunchError) as exc:       # the master not answering: tried again after restart_delay
+        except (OSError, LaunchError) as exc:       # tried again after restart_delay
             slot.proc, slot.exited_at, slot.last_code = None, time.monotonic(), None
-            rospy.logwarn(f'{slot.module}: not started, its parameters could not be set: {exc}')
+            rospy.logwarn(f'{slot.module}: not started: {exc}')
             return
         slot.proc = Proc(launch.argv, log, env=launch.env)
         slot.last_pid = slot.proc.pid

@@ -1,4 +1,4 @@
-"""A module instance's launch, resolved once by the agent: the node's command line, environment and parameters.
+"""A module instance's launch, resolved by the agent: the node's command line, environment and parameters.
 
 The agent used to start every instance as ``cnr_launch <package> <file> <module>:=true ...``: a launch parent per
 instance that imports roslaunch, parses the launch file, sets the parameters and starts the one node. On the
@@ -7,7 +7,9 @@ robot, whose modules share a third of a core, that parent costs more CPU than th
 runs (all parents together: 0.027 CPU of the robot's 0.33 in the hot bench, session 11). Now the agent loads the
 launch once with roslaunch's own loader (same substitutions, includes, ``rosparam`` files, ``env`` and remaps as
 ``roslaunch``) and starts each instance itself: the parameters in one XML-RPC multicall to the master, then the
-node's process, exactly as roslaunch would have run it.
+node's process, exactly as roslaunch would have run it. The launch is resolved again for every instance (as a
+``roslaunch`` per instance would read it: a configuration edited since is what the next instance gets), without
+roscore.xml (its ``rosversion`` calls were two thirds of the 0.2 s a resolution took).
 
 An instance is one node: a launch that gives a module no node or several is a configuration error.
 """
@@ -57,13 +59,18 @@ def resolve(package: str, launch_file: str, module: str, args: Sequence[str], ma
     """The one node that ``<package> <launch_file> <args...>`` (``name:=value``) launches for ``module``."""
     import roslaunch.config
     import roslaunch.core
+    import roslaunch.loader
     import roslaunch.node_args
     import roslaunch.rlutil
+    import roslaunch.xmlloader
     from roslaunch.core import RLException
     try:
         files = roslaunch.rlutil.resolve_launch_arguments([package, launch_file])
-        config = roslaunch.config.load_config_default([(files[0], list(args))], None, verbose=False)
-    except (RLException, IndexError) as exc:
+        config = roslaunch.config.ROSLaunchConfig()
+        roslaunch.xmlloader.XmlLoader().load(files[0], config, argv=list(args), verbose=False)
+        config.assign_machines()
+    except (RLException, roslaunch.xmlloader.XmlParseException, roslaunch.loader.LoadException,
+            IndexError) as exc:
         raise LaunchError(f'{package} {launch_file} {module}:=true: {exc}') from exc
     if len(config.nodes) != 1:
         names = ', '.join(n.name for n in config.nodes) or 'none'
