@@ -342,3 +342,89 @@ def test_a_cut_off_instance_pauses_and_resumes_and_a_frozen_one_takes_its_goal_b
     assert again and again[0][1].get(goal_id) == GoalStatus.ACTIVE, again[:3]
     assert c.alive()
     assert_clean(c, 'C')
+
+
+def test_a_goal_and_a_cancel_sent_while_no_instance_is_active_are_taken_up_by_the_next(world):
+    """The action server as two instances use it (two servers on one action name, over real TCPROS; the
+    simulator's clock): A active, B prepared (a standby). A goal A finished, a goal A is pursuing when it is
+    frozen, then — no instance active — a cancel of that goal and a new goal. B, promoted with A's state,
+    takes the pursued goal over, replays exactly the cancel and the new goal (not the finished one), and the
+    client's newest goal ends SUCCEEDED from B."""
+    import actionlib
+    from actionlib_msgs.msg import GoalStatus
+    from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
+    from cnr_navigation.action_server import TakeoverActionServer
+    ns = '/takeover_gap_test'
+    ran, finish, servers = [], set(), {}
+
+    def execute(name):
+        def cb(_goal):
+            server = servers[name]
+            gid = server.current_goal.get_goal_id().id
+            ran.append((name, gid))
+            while not rospy.core.is_shutdown():
+                if not server.started:                    # released (frozen): no terminal status
+                    with server.action_server.lock, server.lock:
+                        return
+                if server.is_preempt_requested():
+                    server.set_preempted()
+                    return
+                if gid in finish:
+                    server.set_succeeded()
+                    return
+                time.sleep(0.02)
+        return cb
+    servers['a'] = TakeoverActionServer(ns, MoveBaseAction, execute('a'))
+    servers['b'] = TakeoverActionServer(ns, MoveBaseAction, execute('b'))
+    a, b = servers['a'], servers['b']
+    b.prepare()
+    a.start_with([])
+    client = actionlib.ActionClient(ns, MoveBaseAction)
+    try:
+        wait_until(lambda: client.wait_for_server(rospy.Duration(0.2)), 30, 'the action server')
+        wait_until(lambda: a.action_server.goal_sub.get_num_connections() >= 1 and
+                   b.action_server.goal_sub.get_num_connections() >= 1, 30, 'both servers connected')
+        g = MoveBaseGoal()
+        g.target_pose.header.frame_id = 'map'
+        g.target_pose.pose.orientation.w = 1.0
+        h0 = client.send_goal(g)
+        gid0 = h0.comm_state_machine.action_goal.goal_id.id
+        wait_until(lambda: ('a', gid0) in ran, 30, 'A running the first goal')
+        finish.add(gid0)
+        wait_until(lambda: h0.get_goal_status() == GoalStatus.SUCCEEDED, 30, 'the first goal to succeed')
+        h1 = client.send_goal(g)
+        gid1 = h1.comm_state_machine.action_goal.goal_id.id
+        wait_until(lambda: ('a', gid1) in ran, 30, 'A running the second goal')
+        wait_until(lambda: len(b._parked) >= 2, 30, 'B to park the goals it received as a standby')
+
+        # ---- A frozen: its state (the pursued goal, what it received), then its server released
+        with a.action_server.lock, a.lock:
+            seen_goals, seen_cancels = a.seen()
+            active = a.current_goal.goal
+        a.release()
+        assert gid0 in seen_goals and gid1 in seen_goals
+        # ---- the gap: a cancel of the pursued goal and a new goal reach no active instance
+        h1.cancel()
+        h2 = client.send_goal(g)
+        gid2 = h2.comm_state_machine.action_goal.goal_id.id
+        wait_until(lambda: len(b._parked) >= 4, 30, 'B to park the cancel and the new goal')
+        assert not [r for r in ran if r[1] == gid2]
+
+        # ---- B promoted with A's state
+        replayed = b.start_with([(active, 'active', False)], seen_goals, seen_cancels)
+        assert replayed == [f'cancel {gid1}', f'goal {gid2}'], replayed
+        wait_until(lambda: ('b', gid2) in ran, 30, 'B running the goal sent in the gap')
+        finish.add(gid2)
+        wait_until(lambda: h2.get_goal_status() == GoalStatus.SUCCEEDED, 30, 'the gap goal to succeed from B')
+        assert ('b', gid0) not in ran                      # the finished goal is not run again
+        assert h1.get_goal_status() in (GoalStatus.PREEMPTED, GoalStatus.PREEMPTING), h1.get_goal_status()
+        # B's own record carries on what A received: a next hand-over knows it too
+        assert {gid0, gid1, gid2} <= set(b.seen()[0])
+    finally:
+        for server in servers.values():
+            server.release()
+            server.action_server.goal_sub.unregister()
+            server.action_server.cancel_sub.unregister()
+            for pub in (server.action_server.status_pub, server.action_server.result_pub,
+                        server.action_server.feedback_pub):
+                pub.unregister()

@@ -18,14 +18,19 @@ GOAL = GoalRecord('/mfg-3-12.500', 1712, 500_000_000, 'map', 4.0, 0.4, 0.5, Fals
 NEXT = GoalRecord('/mfg-4-13.000', 1713, 0, 'base_link', 1.0, -0.5, -1.0, True)
 
 
+SEEN = ('/mfg-2-11.000', '/mfg-3-12.500', '/mfg-4-13.000')
+CANCELS = (('', 0, 0), ('/mfg-2-11.000', 1711, 0))
+HANDOVER = HandOver(GOAL, NEXT, SEEN, CANCELS)
+
+
 def good_state():
-    return HandOver(GOAL, NEXT).to_dict()
+    return HANDOVER.to_dict()
 
 
 def test_round_trip_through_the_migration_codec():
     data = codec.encode('move_base', good_state())
     back = parse_state(codec.decode('move_base', data), recoveries=4)
-    assert back == HandOver(GOAL, NEXT)
+    assert back == HANDOVER
     assert back.goal.recovery_index == 2 and back.goal.recovery_trigger == 'CONTROLLING_R'
     assert back.goal.plan == GOAL.plan
     # a pending goal carries no recovery state or plan of its own
@@ -33,6 +38,9 @@ def test_round_trip_through_the_migration_codec():
     older = good_state()
     del older['goal']['plan']                                     # an instance from before plans were handed over
     assert parse_state(older, 4).goal.plan == ()
+    del older['seen_goals'], older['seen_cancels']                # ... or before what it received was
+    assert parse_state(older, 4).seen_goals is None               # not known: the next replays nothing parked
+    assert HandOver().seen_goals == ()                            # no state at all (a first start): nothing seen
 
 
 def test_no_goal_is_a_valid_state_and_nan_targets_are_kept():
@@ -63,6 +71,11 @@ def test_no_goal_is_a_valid_state_and_nan_targets_are_kept():
     (lambda s: s['goal']['plan'].insert(0, [1.0, math.nan, 0.0]), 'goal.plan[0]'),
     (lambda s: s['next_goal'].pop('y'), 'next_goal.y'),
     (lambda s: s['next_goal'].update(id=GOAL.id), 'next_goal.id'),
+    (lambda s: s.update(seen_goals='/mfg-2'), 'seen_goals must be a list'),
+    (lambda s: s['seen_goals'].append(''), 'seen_goals must be a list'),
+    (lambda s: s.update(seen_cancels={}), 'seen_cancels must be a list'),
+    (lambda s: s['seen_cancels'].append(['g', -1, 0]), 'seen_cancels[2]'),
+    (lambda s: s['seen_cancels'].append(['g', 1]), 'seen_cancels[2]'),
 ])
 def test_a_state_that_does_not_fit_is_refused_naming_the_field(change, field):
     state = copy.deepcopy(good_state())

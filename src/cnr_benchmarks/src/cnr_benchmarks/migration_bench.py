@@ -41,6 +41,10 @@ FAILOVER_COLUMNS = ['rtt_ms', 'module', 'standby', 'trial', 'promoted_after', 'o
 RESULT = re.compile(r'migration (\d+): (\S+) -> (\S+): (\S+) \(term (\d+), ([\d.]+) s(?:; hand-over (\d+) ms)?\)')
 
 
+
+class MissionEnded(RuntimeError):
+    """The two-host mission under the bench exited: nothing more can be measured."""
+
 class Bench:
     def __init__(self, args: argparse.Namespace) -> None:
         from cnr_testbed.api import Testbed
@@ -81,6 +85,8 @@ class Bench:
         while time.monotonic() < deadline:
             if condition():
                 return True
+            if self.mission is not None and not self.mission.alive():
+                raise MissionEnded(f'the mission ended (exit {self.mission.poll()}, see {self.out}/mission.log)')
             time.sleep(0.5)
         report.progress(f'  (gave up waiting for {what} after {timeout:.0f} s)')
         return False
@@ -289,6 +295,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     results = report.TsvLog(os.path.join(bench.out, 'results.tsv'), COLUMNS)
     failover = report.TsvLog(os.path.join(bench.out, 'failover.tsv'), FAILOVER_COLUMNS)
     summary: Dict = {}
+    status = 0
     try:
         bench.start()
         for rtt in rtts:
@@ -300,6 +307,9 @@ def main(argv: Optional[List[str]] = None) -> int:
                 bench.cutoffs(failover, rtt)
     except KeyboardInterrupt:
         report.progress('interrupted: writing what was measured')
+    except MissionEnded as exc:
+        report.progress(f'stopped: {exc}; writing what was measured')
+        status = 1
     finally:
         summary = bench.stop()
         results.close()
@@ -312,7 +322,7 @@ def main(argv: Optional[List[str]] = None) -> int:
         aborted = sum(1 for r in read_probe(bench.probe_file) if r.topic == '/move_base/result' and r.instance == '4')
     write_markdown(bench.out, args, res, fo, summary, aborted, started, bench.probe_file)
     report.progress(open(os.path.join(bench.out, 'migration.md')).read())
-    return 0
+    return status
 
 
 if __name__ == '__main__':

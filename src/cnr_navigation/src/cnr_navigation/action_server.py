@@ -8,11 +8,20 @@ or PREEMPTING if a cancel was requested), before the first status array is publi
 runs such a goal without accepting it a second time. :meth:`TakeoverActionServer.release` closes the server
 for good (frozen for a migration): no terminal status for the goal, which belongs to the next instance now.
 
+Goals and cancels sent while no instance is active (between the freeze of one and the start of the next) would
+reach nobody: actionlib sends a goal once, and its client then waits for an acknowledgement until its own
+timeout. A prepared server that is not started therefore *parks* what it receives (the newest
+:data:`PARKED`), and every started server remembers the goal ids and cancels it received (the newest
+:data:`SEEN`, carried on from instance to instance in the hand-over). :meth:`TakeoverActionServer.start_with`
+replays, after the handed-over goals and in arrival order, what it parked that neither it nor the instances
+before it received: exactly what was sent in the gap.
+
 Lock order as actionlib: ``action_server.lock`` before ``self.lock``.
 """
 from __future__ import annotations
 
-from typing import Optional, Sequence, Tuple
+from collections import deque
+from typing import Deque, Iterable, List, Optional, Sequence, Tuple
 
 import actionlib
 import rospy
@@ -20,6 +29,10 @@ from actionlib.server_goal_handle import ServerGoalHandle
 from actionlib_msgs.msg import GoalID, GoalStatus
 
 TAKEN_OVER = 'This goal was taken over from the previous move_base instance'
+PARKED = 16          # goals and cancels a prepared, not started server keeps (the newest)
+SEEN = 64            # goal ids and cancels a started server remembers (the newest); > PARKED, so a parked
+                     # message any instance before received is known to have been received
+CancelKey = Tuple[str, int, int]      # a cancel request: goal id ('' = all), stamp secs, nsecs
 
 
 class TakeoverActionServer(actionlib.SimpleActionServer):
@@ -28,13 +41,47 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
     def __init__(self, name: str, action_spec, execute_cb) -> None:
         self._adopted: Optional[ServerGoalHandle] = None
         self._prepared = False
+        self._parked: Deque[Tuple[str, object]] = deque(maxlen=PARKED)      # ('goal' | 'cancel', message)
+        self._seen_goals: Deque[str] = deque(maxlen=SEEN)
+        self._seen_cancels: Deque[CancelKey] = deque(maxlen=SEEN)
         super().__init__(name, action_spec, execute_cb=execute_cb, auto_start=False)
+        a = self.action_server              # its subscribers (made in initialize()) call these
+        a.internal_goal_callback = self._on_goal
+        a.internal_cancel_callback = self._on_cancel
+
+    @staticmethod
+    def _cancel_key(goal_id: GoalID) -> CancelKey:
+        return goal_id.id, goal_id.stamp.secs, goal_id.stamp.nsecs
+
+    def _on_goal(self, action_goal) -> None:
+        a = self.action_server
+        with a.lock:
+            if a.started:
+                self._seen_goals.append(action_goal.goal_id.id)
+                type(a).internal_goal_callback(a, action_goal)
+            elif self._prepared:
+                self._parked.append(('goal', action_goal))
+
+    def _on_cancel(self, goal_id: GoalID) -> None:
+        a = self.action_server
+        with a.lock:
+            if a.started:
+                self._seen_cancels.append(self._cancel_key(goal_id))
+                type(a).internal_cancel_callback(a, goal_id)
+            elif self._prepared:
+                self._parked.append(('cancel', goal_id))
+
+    def seen(self) -> Tuple[List[str], List[CancelKey]]:
+        """The goal ids and cancels this server received while started (and those it was handed), oldest
+        first: the hand-over's ``seen_goals`` and ``seen_cancels``."""
+        with self.action_server.lock:
+            return list(self._seen_goals), list(self._seen_cancels)
 
     def prepare(self) -> None:
         """Create the action's publishers, subscribers and status timer now, without starting the server: a
         standby does this ahead of its promotion (their registrations with the master and the connections take
-        ≈ 1 s on the capped robot). Until :meth:`start_with`, goals and cancels are ignored and no status goes out
-        (actionlib's ``started`` flag), as after :meth:`release`."""
+        ≈ 1 s on the capped robot). Until :meth:`start_with`, goals and cancels are parked, not acted on, and no
+        status goes out (actionlib's ``started`` flag), as after :meth:`release`."""
         a = self.action_server
         with a.lock, self.lock:
             if not self._prepared:
@@ -45,8 +92,9 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
     def started(self) -> bool:
         return bool(self.action_server.started)
 
-    def start_with(self, goals: Sequence[Tuple[object, str, bool]] = ()) -> None:
-        """Start the server (as ``start()``) with goals taken over.
+    def start_with(self, goals: Sequence[Tuple[object, str, bool]] = (),
+                   seen_goals: Optional[Iterable[str]] = (), seen_cancels: Iterable[CancelKey] = ()) -> List[str]:
+        """Start the server (as ``start()``) with goals taken over, then take up what was sent in the gap.
 
         Args:
             goals: ``(action_goal, status, cancel_requested)``, oldest first; ``action_goal`` is the action's
@@ -55,6 +103,12 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
                 it) or 'pending' (received, not accepted yet: PENDING, or RECALLING if cancelled; accepted as
                 any new goal). A pending goal after an active one preempts it, as it would have in the
                 instance that received it.
+            seen_goals, seen_cancels: what the instances before this one received (the hand-over's): parked
+                messages among them are not replayed. ``seen_goals`` None: not known (a state without it),
+                nothing parked is replayed.
+
+        Returns:
+            what was replayed, for the log (``goal <id>`` / ``cancel <id or all>``).
         """
         a = self.action_server
         with a.lock, self.lock:
@@ -64,8 +118,13 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
                 a.initialize()      # the publish_status() below
                 self._prepared = True
             a.started = True
+            if seen_goals is None:                    # not known what the instances before received
+                self._parked.clear()
+                seen_goals = ()
+            self._seen_goals.extend(seen_goals)
+            self._seen_cancels.extend(tuple(c) for c in seen_cancels)
             for action_goal, status, cancel in goals:
-                a.internal_goal_callback(action_goal)
+                self._on_goal(action_goal)
                 handle = self.next_goal
                 if not (self.new_goal and handle.get_goal() and
                         handle.get_goal_id().id == action_goal.goal_id.id):
@@ -78,8 +137,19 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
                     self.new_goal_preempt_request = cancel
                     self._adopted = handle
                 elif cancel:
-                    a.internal_cancel_callback(GoalID(id=action_goal.goal_id.id))
+                    type(a).internal_cancel_callback(a, GoalID(id=action_goal.goal_id.id))
+            replayed = []
+            goals_known, cancels_known = set(self._seen_goals), set(self._seen_cancels)
+            parked, self._parked = list(self._parked), deque(maxlen=PARKED)
+            for kind, msg in parked:                  # sent while no instance was active: nobody took it
+                if kind == 'goal' and msg.goal_id.id not in goals_known:
+                    self._on_goal(msg)
+                    replayed.append(f'goal {msg.goal_id.id}')
+                elif kind == 'cancel' and self._cancel_key(msg) not in cancels_known:
+                    self._on_cancel(msg)
+                    replayed.append(f'cancel {msg.id or "all"}')
             a.publish_status()
+        return replayed
 
     def accept_new_goal(self):
         """As actionlib's, except for a goal taken over: it is already ACTIVE (or PREEMPTING) at the client."""
@@ -99,7 +169,7 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
         prepared server's (no unregistering while the hand-over waits); :meth:`start_with` may open it again."""
         a = self.action_server
         with a.lock, self.lock:
-            a.started = False           # actionlib: goals and cancels ignored, no status (its stop() would also
+            a.started = False           # goals and cancels parked, no status (actionlib's stop() would also
             a.status_list = []          # unregister everything: slow on the capped robot)
             self.current_goal = ServerGoalHandle()
             self.next_goal = ServerGoalHandle()

@@ -266,7 +266,8 @@ class MoveBaseNode(Hooks):
                     goal = self._record(current, *self.takeover_recovery.get(gid.id, (0, 'PLANNING_R', ())))
             if pending is not None:
                 next_goal = self._record(pending, 0, 'PLANNING_R')
-            return HandOver(goal, next_goal)
+            seen_goals, seen_cancels = self.server.seen()
+            return HandOver(goal, next_goal, tuple(seen_goals), tuple(seen_cancels))
 
     def _record(self, handle, recovery_index: int, recovery_trigger: str, plan=()) -> GoalRecord:
         """A goal as the client sent it (its own frame)."""
@@ -338,7 +339,9 @@ class MoveBaseNode(Hooks):
                 if handover.next_goal is not None:
                     goals.append((self._action_goal(handover.next_goal), 'pending',
                                   handover.next_goal.cancel_requested))
-                self.server.start_with(goals)
+                replayed = self.server.start_with(goals, handover.seen_goals, handover.seen_cancels)
+            if replayed:
+                rospy.loginfo(f'move_base: sent while no instance was active, taken up: {", ".join(replayed)}')
             self.services = [rospy.Service('~make_plan', GetPlan, self._make_plan_service),
                              rospy.Service('~NavfnROS/make_plan', GetPlan, self._navfn_make_plan),
                              rospy.Service('~clear_costmaps', Empty, self._clear_costmaps_service)]

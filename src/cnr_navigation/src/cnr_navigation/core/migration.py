@@ -4,7 +4,10 @@ The state is a JSON object (``migration_manager.core.state`` carries it), docume
 README ("Migration state")::
 
     {"goal": GOAL or null,         # the goal being pursued (ACTIVE, or PREEMPTING: cancel requested)
-     "next_goal": NEXT or null}    # a newer goal received but not accepted yet (PENDING, or RECALLING)
+     "next_goal": NEXT or null,    # a newer goal received but not accepted yet (PENDING, or RECALLING)
+     "seen_goals": [str],          # goal ids the instances so far received (newest last): a goal the next
+     "seen_cancels": [[str, int, int]]}   # instance parked that is not among them was sent in the gap; cancels
+                                          # as [goal id or '', stamp secs, nsecs]
 
     GOAL = NEXT + {"recovery_index": int, "recovery_trigger": "PLANNING_R" | "CONTROLLING_R" | "OSCILLATION_R"}
     NEXT = {"id": str, "stamp_secs": int, "stamp_nsecs": int,     # the actionlib goal id, as the client made it
@@ -20,7 +23,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Any, Dict, Mapping, Optional, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 from cnr_navigation.core.geometry import Quaternion, quaternion_problem, quaternion_to_yaw
 
@@ -74,10 +77,14 @@ class HandOver:
 
     goal: Optional[GoalRecord] = None
     next_goal: Optional[GoalRecord] = None
+    seen_goals: Optional[Tuple[str, ...]] = ()          # None: not known (a state of an older instance)
+    seen_cancels: Tuple[Tuple[str, int, int], ...] = ()
 
     def to_dict(self) -> Dict[str, Any]:
         return {'goal': self.goal.to_dict(True) if self.goal else None,
-                'next_goal': self.next_goal.to_dict(False) if self.next_goal else None}
+                'next_goal': self.next_goal.to_dict(False) if self.next_goal else None,
+                'seen_goals': list(self.seen_goals or ()),
+                'seen_cancels': [list(c) for c in self.seen_cancels]}
 
     @property
     def empty(self) -> bool:
@@ -160,14 +167,33 @@ def parse_state(state: Any, recoveries: int) -> HandOver:
     for key in ('goal', 'next_goal'):
         if key not in state:
             raise ValueError(f'move_base state: {key} is missing (null if there is none)')
-    unknown = sorted(set(state) - {'goal', 'next_goal'})
+    unknown = sorted(set(state) - {'goal', 'next_goal', 'seen_goals', 'seen_cancels'})
     if unknown:
         raise ValueError(f'move_base state: unknown key {unknown[0]!r}')
     goal = _record(state['goal'], 'goal', True, recoveries)
     next_goal = _record(state['next_goal'], 'next_goal', False, recoveries)
     if goal is not None and next_goal is not None and goal.id == next_goal.id:
         raise ValueError(f'move_base state: next_goal.id {next_goal.id!r} is the id of goal')
-    return HandOver(goal, next_goal)
+    seen_goals: Optional[Tuple[str, ...]] = None
+    if 'seen_goals' in state:
+        v = state['seen_goals']
+        if not isinstance(v, list) or not all(isinstance(g, str) and g for g in v):
+            raise ValueError(f'move_base state: seen_goals must be a list of goal ids, got {v!r}')
+        seen_goals = tuple(v)
+    return HandOver(goal, next_goal, seen_goals, _cancels(state.get('seen_cancels', [])))
+
+
+def _cancels(v: Any) -> Tuple[Tuple[str, int, int], ...]:
+    """``seen_cancels``: a list of [goal id or '', stamp secs, stamp nsecs]."""
+    if not isinstance(v, list):
+        raise ValueError(f'move_base state: seen_cancels must be a list, got {type(v).__name__}')
+    out: List[Tuple[str, int, int]] = []
+    for i, c in enumerate(v):
+        if (not isinstance(c, list) or len(c) != 3 or not isinstance(c[0], str)
+                or not all(isinstance(n, int) and not isinstance(n, bool) and n >= 0 for n in c[1:])):
+            raise ValueError(f'move_base state: seen_cancels[{i}] must be [goal id, secs, nsecs], got {c!r}')
+        out.append((c[0], c[1], c[2]))
+    return tuple(out)
 
 
 def target_yaw(q: Quaternion) -> float:
