@@ -312,6 +312,12 @@ def test_config_from_the_workspace_and_errors_name_the_field(workspace):
     bad = dict(data, hot_standby=['kestrel_driver'])
     with pytest.raises(ConfigError, match='hot_standby'):
         from_section(Section(bad, 'config/migration.yaml'))
+    assert cfg.dormant == {'move_base': ('robot',)}
+    fewer = from_section(Section(dict(data, modules=['mfg']), 'config/migration.yaml'))
+    assert fewer.dormant == {}                  # a run managing fewer modules ignores the others' entries
+    for dormant, field in (({'mfg': ['moon']}, 'mfg'), ({'mfg': 'robot'}, 'mfg'), (['move_base'], 'must map')):
+        with pytest.raises(ConfigError, match=f'dormant.*{field}'):
+            from_section(Section(dict(data, dormant=dormant), 'config/migration.yaml'))
     bad = dict(data, control_nice=-21)
     with pytest.raises(ConfigError, match='control_nice'):
         from_section(Section(bad, 'config/migration.yaml'))

@@ -428,3 +428,60 @@ def test_a_goal_and_a_cancel_sent_while_no_instance_is_active_are_taken_up_by_th
             for pub in (server.action_server.status_pub, server.action_server.result_pub,
                         server.action_server.feedback_pub):
                 pub.unregister()
+
+
+def node_subscriptions(node: str) -> set:
+    import rosgraph
+    return {t for t, nodes in rosgraph.Master('/pytest').getSystemState()[1] if node in nodes}
+
+
+def test_a_retired_instance_sleeps_without_its_inputs_and_wakes_to_take_a_goal_over(world, instances):
+    """Dormant (config/migration.yaml ``dormant``): a frozen instance put to sleep drops its sensor, odometry
+    and tf subscriptions and refuses a promotion; woken, it subscribes again, is a ready standby (same
+    process) and, promoted with the state it was frozen with, drives the goal to SUCCEEDED."""
+    from actionlib_msgs.msg import GoalStatus
+    sim, rec, driver = world
+    d = instances('robot')
+    driver.wait_standby(90, host='robot')
+    client = Client()
+    driver.promote(host='robot')
+    driver.wait_active(10, host='robot')
+    wait_until(lambda: client.client.wait_for_server(rospy.Duration(0.5)), 30, 'the action server')
+    inputs = {'/odom', '/tf', '/scan'}
+    assert inputs <= node_subscriptions('/move_base'), node_subscriptions('/move_base')
+    x0 = rec.pose[0]
+    goal_x = 1.0 if x0 > 3.0 else 5.0
+    goal_id = client.send(goal_x, 0.0)
+    wait_until(lambda: abs(rec.pose[0] - x0) > 0.8, 120, 'the robot under way', d)
+
+    # a standby cannot sleep (only a frozen instance); frozen, it can
+    res = driver.controls['robot'](command='sleep')
+    assert not res.ok and 'only a frozen instance' in res.message, res
+    state = driver.freeze(host='robot')
+    assert state['goal']['id'] == goal_id
+    pid = driver.status.pid
+    res = driver.controls['robot'](command='sleep')
+    assert res.ok, res.message
+    driver.wait_role('dormant', 10, host='robot')
+    wait_until(lambda: not inputs & node_subscriptions('/move_base'), 20, 'the inputs unsubscribed', d)
+    assert not driver.status.ready
+    term = driver.grantor.term
+    res = driver.controls['robot'](command='promote', term=term + 1)
+    assert not res.ok and 'dormant' in res.message, res
+    wait_until(rec.stopped, 20, 'the robot to stop')
+
+    # woken: a standby again (the same process), ready once its local costmap is current
+    res = driver.controls['robot'](command='wake')
+    assert res.ok, res.message
+    st = wait_until(lambda: driver.status if driver.status.role == 'standby' and driver.status.ready else None,
+                    30, 'the woken standby ready', d)
+    assert st.pid == pid
+    assert inputs <= node_subscriptions('/move_base')
+    driver.promote(state, host='robot')
+    driver.wait_active(10, host='robot')
+    wait_until(lambda: client.client.wait_for_result(rospy.Duration(0.2)), 180, 'the goal result', d)
+    assert client.client.get_state() == GoalStatus.SUCCEEDED, client.client.get_goal_status_text()
+    assert not client.bad_statuses(), client.transitions
+    assert math.hypot(rec.pose[0] - goal_x, rec.pose[1]) <= 0.2
+    assert d.alive()
+    assert_clean(d, 'D')

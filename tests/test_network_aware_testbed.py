@@ -75,6 +75,8 @@ def test_a_good_link_offloads_and_a_bad_one_onloads_by_knn(tmp_path):
     assert float(bad['c_l']) > 0.25
     # move_base was brought home before the profile (decider.profile_at_home), so placing it was no migration
     assert float(bad['placing_time']) < 1.0, bad
+    # ... by waking the robot's instance the offload had put to sleep (config/migration.yaml dormant), not a clone
+    assert 'woke the dormant instance on robot' in out, out[-3000:]
     # the paired run: forced offload on the previous profile (nothing measured again), the policy recorded
     assert (paired['decision'], paired['reason'], paired['policy']) == (OFFLOAD, 'forced', ONLOAD), paired
     assert (paired['c_l'], paired['r_bw']) == (bad['c_l'], bad['r_bw']) and paired['placement'] == 'move_base=cloud'

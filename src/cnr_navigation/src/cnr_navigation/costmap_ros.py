@@ -172,6 +172,25 @@ class CostmapROS:
                            {f.name: (f.offset, f.datatype) for f in cloud.fields}, cloud.is_bigendian)
         return [cloud_to_observation(points, found[0], found[1], params.layer, self.costmap.cfg.resolution, origin)]
 
+    def sleep(self) -> None:
+        """Dormant (a retired migration instance kept for a quick wake-up): the observation sources are
+        unsubscribed, so no sensor data crosses to this instance and none is processed, and the obstacles are
+        forgotten (stale by the time it wakes); the update loop is paused by ``active``. The map subscription
+        stays (latched, silent)."""
+        for src in self.sources:
+            src.subscriber.sub.unregister()
+        with self.lock:
+            self.costmap.clear_obstacles()
+
+    def wake(self) -> None:
+        """Subscribe to the observation sources again (after :meth:`sleep`)."""
+        fresh = []
+        for src in self.sources:
+            new = _Source(src.params)
+            new.max_obstacle_height = src.max_obstacle_height      # as configured, not as reconfigured
+            fresh.append(new)
+        self.sources = fresh
+
     def sensors_current(self, warn: bool = True) -> bool:
         """costmap_2d's ``isCurrent``: every source with an expected rate sent a scan recently (``warn``: say
         which one did not, at most every 5 s)."""

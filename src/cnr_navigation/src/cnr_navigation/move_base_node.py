@@ -90,6 +90,7 @@ class MoveBaseNode(Hooks):
         self.retiring = Retiring()               # a frozen instance's services, unregistered after the freeze
         self.reconfigure_servers: List[ReconfigureServer] = []
         self.ready = threading.Event()           # the node is complete (the instance may be promoted before)
+        self.dormant = False                     # retired and asleep: no sensor subscriptions, costmaps paused
         self.server = TakeoverActionServer('move_base', MoveBaseAction, self._execute)
         self.tf_buffer = tf2_ros.Buffer()
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
@@ -210,8 +211,10 @@ class MoveBaseNode(Hooks):
         """Promotable without a stall: the node is complete and its local costmap follows the sensors (each
         source with an expected rate sent a scan within it). A clone promoted before its first scans waits for
         them in its first control cycle: cold cloud -> robot hand-overs took 2.6-6.6 s (median) with the clone
-        just started on the capped robot (bench_migration.sh, session 11)."""
-        return self.ready.is_set() and self.local_costmap.sensors_current(warn=False)
+        just started on the capped robot (bench_migration.sh, session 11). And its action server hears every
+        client: a goal sent right after the promotion must not be lost to a subscription still connecting."""
+        return (self.ready.is_set() and not self.dormant and self.local_costmap.sensors_current(warn=False)
+                and self.server.clients_connected())
 
     # ================================================================================================
     # outputs and migration (README "Migration state")
@@ -375,11 +378,35 @@ class MoveBaseNode(Hooks):
                 self.core.reset()
             self.retiring.close()
 
+    def on_sleep(self) -> None:
+        """Dormant (a frozen instance the manager keeps for the next migration here): the sensor, odometry and
+        tf subscriptions closed, the costmaps paused with their obstacles forgotten. The process, its
+        parameters, registrations and prepared action server stay, so waking takes a subscription, not a
+        start-up (a clone starting under the robot's CPU cap took 17-27 s)."""
+        with self.open_lock:
+            self.dormant = True
+            self.odom_sub.unregister()
+            self.tf_listener.unregister()
+            for cm in (self.global_costmap, self.local_costmap):
+                cm.sleep()
+            self.velocity = (0.0, 0.0)
+
+    def on_wake(self) -> None:
+        """A standby again: sensors, odometry and tf subscribed anew (tf from an empty buffer: the old one is
+        stale), costmaps updating; ready once the local costmap is current (``standby_ready``)."""
+        with self.open_lock:
+            self.tf_buffer.clear()
+            self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
+            self.odom_sub = rospy.Subscriber(self.params.odom_topic, Odometry, self._on_odom, queue_size=1)
+            for cm in (self.global_costmap, self.local_costmap):
+                cm.wake()
+            self.dormant = False
+
     # ================================================================================================
     # callbacks
 
     def _costmaps_active(self) -> bool:
-        return not self.core_cfg_shutdown_costmaps() or self.server.is_active()
+        return not self.dormant and (not self.core_cfg_shutdown_costmaps() or self.server.is_active())
 
     def core_cfg_shutdown_costmaps(self) -> bool:
         core = getattr(self, 'core', None)

@@ -15,6 +15,9 @@ manager (``~migration/role`` empty or absent: every single-master and fixed-plac
 - a lapse (no grant for ``duration``, e.g. cut off): outputs closed until renewals are granted again;
 - superseded (a newer term or another holder announced) or frozen: outputs closed for good (``on_frozen``);
   a superseded instance shuts its node down (its agent starts a fresh standby if one is wanted here);
+- dormant (``sleep``, a frozen instance the manager keeps on its host instead of stopping it, for modules that
+  implement ``on_sleep``): inputs closed too, no requests, nothing but its status; ``wake`` makes it a standby
+  again (``on_wake``), which the next migration to this host promotes instead of starting a clone;
 - the active instance publishes its state every ``replicate_period`` on ``/migration/<module>/state``.
 
 Topics and services (``<m>`` the module, ``<h>`` this host): ``/migration/<m>/renew`` (out),
@@ -64,6 +67,17 @@ class Hooks:
     def after_frozen(self) -> None:
         """Slow clean-up after a freeze (e.g. unregistering services with the master), in a thread of its own
         once the freeze was answered. A promotion that follows (a rolled-back migration) may run meanwhile."""
+
+    def on_sleep(self) -> None:
+        """A frozen instance goes dormant: close the inputs too (no CPU, no traffic) but keep the process and
+        what it built, so that :meth:`on_wake` is quick. NotImplementedError: the module cannot (the manager
+        then stops the instance)."""
+        raise NotImplementedError
+
+    def on_wake(self) -> None:
+        """A dormant instance becomes a standby again: inputs open, own state reset (a promotion gives it the
+        handed-over one)."""
+        raise NotImplementedError
 
 
 class Retiring:
@@ -115,6 +129,7 @@ class ManagedInstance:
             distinct_callerid(section.string('host'))
         self.lock = threading.RLock()
         self.frozen = False
+        self.dormant = False               # asleep after a freeze (``sleep``), until ``wake``
         self.frozen_wall = 0.0             # wall time the outputs were closed for good (the status's stamp then)
         self.was_active = False
         self.activation = threading.Lock()     # on_active / lapse transitions: one thread at a time
@@ -158,6 +173,8 @@ class ManagedInstance:
 
     # ------------------------------------------------------------------ protocol
     def _role(self) -> str:
+        if self.dormant:
+            return 'dormant'
         if self.frozen:
             return 'frozen'
         if self.holder.superseded:
@@ -169,7 +186,7 @@ class ManagedInstance:
     def _status(self) -> None:
         with self.lock:
             role = self._role()
-        ready = role != 'standby' or bool(self.hooks.standby_ready())
+        ready = role != 'dormant' and (role != 'standby' or bool(self.hooks.standby_ready()))
         msg = InstanceStatus(module=self.module, instance=self.id, role=role, term=self.holder.term,
                              ready=ready, pid=os.getpid(), message=self.message)
         # frozen: stamped with the moment the outputs were closed (a consumer measures the downtime from it)
@@ -196,7 +213,7 @@ class ManagedInstance:
         self.elevator.this_thread()
         try:
             if req.command == 'state':
-                ready = self.holder.term > 0 or bool(self.hooks.standby_ready())
+                ready = not self.dormant and (self.holder.term > 0 or bool(self.hooks.standby_ready()))
                 return InstanceControlResponse(ok=True, message='ready' if ready else 'not ready',
                                                term=self.holder.term, state=self._state_bytes())
             if req.command == 'freeze':
@@ -213,7 +230,12 @@ class ManagedInstance:
                 threading.Thread(target=self.hooks.after_frozen, name='after-frozen', daemon=True).start()
                 rospy.loginfo(f'{self.id}: frozen (term {req.term}); state {len(data)} bytes handed over')
                 return InstanceControlResponse(ok=True, message=self.message, term=req.term, state=data)
+            if req.command in ('sleep', 'wake'):
+                return self._sleep_or_wake(req.command)
             if req.command == 'promote':
+                if self.dormant:
+                    return InstanceControlResponse(ok=False, term=self.holder.term,
+                                                   message='dormant: wake it first')
                 with self.lock:
                     again = (req.term == self.holder.term and not self.frozen and not self.holder.superseded)
                     if not again:
@@ -237,6 +259,40 @@ class ManagedInstance:
         except (ValueError, KeyError, TypeError) as exc:      # a state that does not fit, a stale promotion
             rospy.logwarn(f'{self.id}: {req.command} refused: {exc}')
             return InstanceControlResponse(ok=False, message=str(exc), term=self.holder.term)
+
+    def _sleep_or_wake(self, command: str) -> InstanceControlResponse:
+        """``sleep``: a frozen instance goes dormant; ``wake``: a dormant one becomes a standby (term 0, a fresh
+        lease holder that keeps what it has heard of the module's terms)."""
+        with self.lock:
+            if command == 'sleep' and not self.frozen:
+                return InstanceControlResponse(ok=False, term=self.holder.term,
+                                               message=f'only a frozen instance sleeps (this one is {self._role()})')
+            if command == 'wake' and not self.dormant:
+                return InstanceControlResponse(ok=False, term=self.holder.term,
+                                               message=f'not dormant (this one is {self._role()})')
+        try:
+            if command == 'sleep':
+                self.hooks.on_sleep()
+            else:
+                self.hooks.on_wake()
+        except NotImplementedError:
+            return InstanceControlResponse(ok=False, term=self.holder.term,
+                                           message=f'{self.module} cannot {command}')
+        with self.lock:
+            if command == 'sleep':
+                self.dormant, self.frozen = True, False
+                old = self.holder
+                self.holder = Holder(self.module, self.id, seen=old.seen, seen_holder=old.seen_holder,
+                                     heard=old.heard)
+                self.was_active = False
+                self.message = 'dormant (retired here; woken by the next migration to this host)'
+            else:
+                self.dormant = False
+                self.message = 'standby (woken)'
+        rospy.loginfo(f'{self.id}: {self.message}')
+        self._status()
+        self.wake.set()
+        return InstanceControlResponse(ok=True, message=self.message, term=self.holder.term)
 
     def _transitions(self) -> None:
         """Open the outputs when the instance became active (``on_active``), report a lapse when it stopped."""
@@ -263,7 +319,7 @@ class ManagedInstance:
             now = time.monotonic()
             with self.lock:
                 promoted = self.holder.term > 0 and not self.frozen and not self.holder.superseded
-                standby = self.holder.term == 0 and not self.frozen
+                standby = self.holder.term == 0 and not self.frozen and not self.dormant
                 active = promoted and self.holder.active(now)
                 superseded = self.holder.superseded and not self.frozen
                 role = self._role()

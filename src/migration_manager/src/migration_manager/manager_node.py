@@ -246,6 +246,21 @@ class Manager:
         outcome calls for."""
         m = run.migration
         if verb == 'start_standby':
+            with self.lock:
+                st = self.books[m.module].status.get(host)
+                dormant = st is not None and st.role == 'dormant'
+            if dormant:              # a retired instance asleep there: woken, it is a standby in a moment
+                ok, res = self.control[(m.module, host)].call(command='wake')
+                if ok and res.ok:
+                    run.agent_pid = st.pid
+                    with self.lock:
+                        m.woken = True
+                    rospy.loginfo(f'{m.module}: woke the dormant instance on {host} (pid {st.pid}) instead of '
+                                  f'starting a clone')
+                    return []
+                rospy.logwarn(f'{m.module}: waking the dormant instance on {host} failed '
+                              f'({res if not ok else res.message}): starting a new one')
+                self._call(self.agents[host], 'stop', m.module)
             ok, res = self._call(self.agents[host], 'start', m.module)
             if ok and res.ok:
                 run.agent_pid = res.pid
@@ -276,7 +291,16 @@ class Manager:
             rospy.logerr(f'{m.module}: reinstating {host} failed: {res if not ok else res.message}')
             return []
         if verb == 'retire':
-            if detail == 'cold' or m.module not in self.cfg.hot_standby:
+            if (detail == 'cold' or m.module not in self.cfg.hot_standby) and \
+                    host in self.cfg.dormant.get(m.module, ()):
+                ok, res = self.control[(m.module, host)].call(command='sleep')
+                if ok and res.ok:
+                    rospy.loginfo(f'{m.module}: the retired instance on {host} sleeps (dormant)')
+                else:      # it cannot sleep: stopped as any retired cold instance
+                    rospy.logwarn(f'{m.module}: the retired instance on {host} did not go dormant '
+                                  f'({res if not ok else res.message}): stopping it')
+                    self._call(self.agents[host], 'stop', m.module)
+            elif detail == 'cold' or m.module not in self.cfg.hot_standby:
                 self._call(self.agents[host], 'stop', m.module)
             else:                     # hot: the old instance makes way for a fresh standby there
                 self._call(self.agents[host], 'stop', m.module)
@@ -299,8 +323,10 @@ class Manager:
         except ValueError as exc:
             return MigrateResponse(ok=False, outcome='refused', message=str(exc), downtime=math.nan)
         outcome = m.step.value
-        return MigrateResponse(ok=m.step is Step.DONE, outcome=outcome, id=mid, term=m.term,
-                               message=m.events[-1].message if m.events else '',
+        message = m.events[-1].message if m.events else ''
+        if m.woken:
+            message += f'; woke the dormant instance on {m.target}'
+        return MigrateResponse(ok=m.step is Step.DONE, outcome=outcome, id=mid, term=m.term, message=message,
                                downtime=m.downtime if m.downtime is not None else math.nan,
                                duration=time.monotonic() - started)
 

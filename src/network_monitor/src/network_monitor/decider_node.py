@@ -120,7 +120,7 @@ class DeciderNode:
             if res.ok and res.outcome == 'done':
                 moved += 1
                 placed += 1
-                notes.append(f'{module} -> {host} in {res.duration:.1f} s')
+                notes.append(f'{module} -> {host} in {res.duration:.1f} s ({res.message})')
             elif res.outcome == 'refused' and f'already on {host}' in res.message:
                 placed += 1
                 notes.append(f'{module} already on {host}')

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from typing import Tuple
+from typing import Dict, Tuple
 
 from cnr_params import Section
 
@@ -35,6 +35,8 @@ class MigrationConfig:
     status_period: float
     failover: bool
     hot_standby: Tuple[str, ...]
+    dormant: Dict[str, Tuple[str, ...]]   # module -> hosts where its instance, retired by a cold migration,
+                                         # sleeps (kept for a quick wake-up) instead of being stopped
     stop_timeout: float
     restart_delay: float
     log_dir: str
@@ -54,6 +56,21 @@ def _names(s: Section, key: str, allowed: Tuple[str, ...] = ()) -> Tuple[str, ..
     if bad:
         raise s.error(key, f'{", ".join(bad)} not among {", ".join(allowed)}')
     return tuple(value)
+
+
+def _dormant(s: Section, modules: Tuple[str, ...], hosts: Tuple[str, ...]) -> Dict[str, Tuple[str, ...]]:
+    value = s.raw('dormant')
+    if not isinstance(value, dict):
+        raise s.error('dormant', f'must map modules to lists of hosts, got {value!r}')
+    out: Dict[str, Tuple[str, ...]] = {}
+    for module, where in value.items():
+        if not isinstance(module, str) or not module:
+            raise s.error('dormant', f'keys must be module names, got {module!r}')
+        if not isinstance(where, list) or not all(h in hosts for h in where):
+            raise s.error('dormant', f'{module}: must be a list of hosts among {", ".join(hosts)}, got {where!r}')
+        if module in modules:      # a run that manages fewer modules (two_host --network-aware) ignores the rest
+            out[module] = tuple(where)
+    return out
 
 
 def from_section(s: Section) -> MigrationConfig:
@@ -82,6 +99,7 @@ def from_section(s: Section) -> MigrationConfig:
         replicate_period=s.number('replicate_period', positive=True),
         status_period=s.number('status_period', positive=True),
         failover=s.boolean('failover'), hot_standby=_names(s, 'hot_standby', modules),
+        dormant=_dormant(s, modules, hosts),
         stop_timeout=agent.number('stop_timeout', positive=True),
         restart_delay=agent.number('restart_delay', minimum=0.0),
         log_dir=os.path.abspath(os.path.expanduser(log_dir)),

@@ -83,6 +83,7 @@ class Migration:
     term: int = 0
     events: List[Event] = field(default_factory=list)
     error: str = ''
+    woken: bool = False                    # the target standby was a dormant instance woken, not a clone
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
