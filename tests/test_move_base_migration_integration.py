@@ -191,6 +191,22 @@ def assert_clean(proc, name):
         assert bad not in out, f'{name}: {bad!r} in its output:\n{out[-4000:]}'
 
 
+def driving(instances, rec, driver, host='robot'):
+    """An instance of ``host`` started, promoted and driving a client's goal: (its process, the client, the
+    goal id, the goal's x)."""
+    proc = instances(host)
+    driver.wait_standby(90, host=host)
+    client = Client()
+    driver.promote(host=host)
+    driver.wait_active(10, host=host)
+    wait_until(lambda: client.client.wait_for_server(rospy.Duration(0.5)), 30, 'the action server')
+    x0 = rec.pose[0]
+    goal_x = 1.0 if x0 > 3.0 else 5.0
+    goal_id = client.send(goal_x, 0.0)
+    wait_until(lambda: abs(rec.pose[0] - x0) > 0.8, 120, 'the robot under way', proc)
+    return proc, client, goal_id, goal_x
+
+
 def test_a_goal_continues_through_a_migration_and_only_the_holder_drives(ros, world, instances):
     from actionlib_msgs.msg import GoalStatus
     from migration_manager.core import state as codec
@@ -296,16 +312,7 @@ def test_a_cut_off_instance_pauses_and_resumes_and_a_frozen_one_takes_its_goal_b
     instance promoted again with its own state (a migration whose target failed) continues the goal."""
     from actionlib_msgs.msg import GoalStatus
     sim, rec, driver = world
-    c = instances('robot')
-    driver.wait_standby(90, host='robot')
-    client = Client()
-    driver.promote(host='robot')
-    driver.wait_active(10, host='robot')
-    wait_until(lambda: client.client.wait_for_server(rospy.Duration(0.5)), 30, 'the action server')
-    x0 = rec.pose[0]
-    goal_x = 1.0 if x0 > 3.0 else 5.0
-    goal_id = client.send(goal_x, 0.0)
-    wait_until(lambda: abs(rec.pose[0] - x0) > 0.8, 120, 'the robot under way', c)
+    c, client, goal_id, goal_x = driving(instances, rec, driver)
 
     # ---- lapse
     driver.cut_off()                                            # renewals unanswered: the lease runs out
@@ -441,18 +448,9 @@ def test_a_retired_instance_sleeps_without_its_inputs_and_wakes_to_take_a_goal_o
     process) and, promoted with the state it was frozen with, drives the goal to SUCCEEDED."""
     from actionlib_msgs.msg import GoalStatus
     sim, rec, driver = world
-    d = instances('robot')
-    driver.wait_standby(90, host='robot')
-    client = Client()
-    driver.promote(host='robot')
-    driver.wait_active(10, host='robot')
-    wait_until(lambda: client.client.wait_for_server(rospy.Duration(0.5)), 30, 'the action server')
+    d, client, goal_id, goal_x = driving(instances, rec, driver)
     inputs = {'/odom', '/tf', '/scan'}
     assert inputs <= node_subscriptions('/move_base'), node_subscriptions('/move_base')
-    x0 = rec.pose[0]
-    goal_x = 1.0 if x0 > 3.0 else 5.0
-    goal_id = client.send(goal_x, 0.0)
-    wait_until(lambda: abs(rec.pose[0] - x0) > 0.8, 120, 'the robot under way', d)
 
     # a standby cannot sleep (only a frozen instance); frozen, it can
     res = driver.controls['robot'](command='sleep')
