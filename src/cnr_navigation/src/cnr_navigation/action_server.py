@@ -89,6 +89,7 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
             if not self._prepared:
                 a.initialize()
                 self._prepared = True
+                self._pause()
 
     def clients_connected(self) -> bool:
         """Are the goal and cancel subscribers connected to every publisher the master lists for their topics
@@ -139,6 +140,7 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
             if not self._prepared:  # publishers, subscribers, status timer: nothing is published before
                 a.initialize()      # the publish_status() below
                 self._prepared = True
+            self._resume()
             a.started = True
             if seen_goals is None:                    # not known what the instances before received
                 self._parked.clear()
@@ -193,10 +195,25 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
         with a.lock, self.lock:
             a.started = False           # goals and cancels parked, no status (actionlib's stop() would also
             a.status_list = []          # unregister everything: slow on the capped robot)
+            self._pause()
             self.current_goal = ServerGoalHandle()
             self.next_goal = ServerGoalHandle()
             self.new_goal = self.preempt_request = self.new_goal_preempt_request = False
             self._adopted = None
+
+    def _pause(self) -> None:
+        """No status timer while the server is not started (prepared, released, a dormant instance's): it would
+        only find the server closed, and a rospy.Timer on sim time wakes at every /clock message (a dormant
+        move_base used 0.025 CPU). :meth:`_resume` starts it with the server. Call with ``action_server.lock``."""
+        a = self.action_server
+        if a.status_timer is not None:
+            a.status_timer.shutdown()
+            a.status_timer = None
+
+    def _resume(self) -> None:
+        a = self.action_server
+        if a.status_timer is None and a.status_frequency > 0.0:
+            a.status_timer = rospy.Timer(rospy.Duration(1.0 / a.status_frequency), a.publish_status_async)
 
     def goal_snapshot(self) -> Tuple[Optional[ServerGoalHandle], Optional[ServerGoalHandle]]:
         """(the goal being pursued, a newer goal not accepted yet), each None if there is none. Call with

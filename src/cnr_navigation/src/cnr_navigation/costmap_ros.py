@@ -242,10 +242,12 @@ class CostmapROS:
         while not rospy.is_shutdown():
             freq = self.costmap.cfg.update_frequency
             try:
-                if self.active():
-                    self.update()
-                    if self.costmap_pub is not None and self.publishing():
-                        self._publish()
+                if not self.active():
+                    time.sleep(0.1)        # paused: a wall-clock nap (rospy.sleep in sim time wakes the thread
+                    continue               # at every /clock message: 0.025 CPU for a dormant move_base)
+                self.update()
+                if self.costmap_pub is not None and self.publishing():
+                    self._publish()
                 rospy.sleep(1.0 / freq if freq > 0 else 0.1)
             except rospy.ROSInterruptException:
                 return

@@ -601,7 +601,7 @@ class MoveBaseNode(Hooks):
                 if self.core.planner_due(now) and self.instance is not None and self.instance.active:
                     self.core.run_planner(now, clock=rospy.get_time)
                 else:
-                    time.sleep(0.02)
+                    time.sleep(0.2 if self.dormant else 0.02)
             except Exception as exc:     # never let the planner thread die silently
                 if rospy.core.is_shutdown_requested():
                     return                # e.g. a plan published onto a topic the shutdown closed
