@@ -170,6 +170,15 @@ def test_results_are_appended_and_a_torn_line_is_reported(tmp_path):
 
 
 # ---------------------------------------------------------------- campaign
+def test_elapsed_time_counts_what_happens_between_runs_but_not_a_resume_pause():
+    rows = [dict(wall_start='100', wall_time='40'), dict(wall_start='145', wall_time='30'),
+            dict(wall_start='5000', wall_time='40'), dict(wall_start='5044', wall_time='bad'),
+            dict(wall_start='5046', wall_time='20')]
+    # 100 -> 145 (45 s with the gap), then 30 s (stopped, resumed at 5000), 5000 -> 5046 (46 s), 20 s
+    assert campaign.elapsed_time(rows) == pytest.approx(45 + 30 + 46 + 20)
+    assert campaign.elapsed_time([]) == 0.0
+
+
 def test_conditions_are_reproducible_and_in_range():
     r = campaign.Ranges(0, 200, 0.5, 50, 0, 0.05)
     a, b = campaign.draw_conditions(50, 3, r), campaign.draw_conditions(50, 3, r)

@@ -239,7 +239,14 @@ def write_analysis(args: argparse.Namespace) -> int:
     budget = (f'Per paired condition (median over {len(pairs)}): {_fmt(pair_wall)} s of wall-clock time, i.e. 100 '
               f'conditions in {_fmt(100 * pair_wall / 3600, 2)} h; onload run {med_of(onload_rows, "wall_time")} s '
               f'(task {med_of(onload_rows, "t_task")} s), offload run {med_of(offload_rows, "wall_time")} s (task '
-              f'{med_of(offload_rows, "t_task")} s, placing {med_of(offload_rows, "placing_time")} s).\n')
+              f'{med_of(offload_rows, "t_task")} s, placing {med_of(offload_rows, "placing_time")} s).')
+    elapsed = core.elapsed_time(rows)
+    if pairs and elapsed > 0:
+        budget += (f" Elapsed from the first run's start to the last one's end, the evaluation and learning between "
+                   f'runs included (the pause of a stopped and resumed campaign left out): {_fmt(elapsed / 3600, 2)} h '
+                   f'for {len(pairs)} conditions, {_fmt(elapsed / len(pairs))} s each, i.e. 100 in '
+                   f'{_fmt(100 * elapsed / len(pairs) / 3600, 2)} h.')
+    budget += '\n'
     def pct(k: int, n: int) -> str:
         return f'{k}/{n} ({_fmt(100 * k / max(n, 1), 0)} %)'
 

@@ -153,6 +153,20 @@ def pairs(rows: Sequence[Dict[str, str]], k: int = 5) -> List[Pair]:
 EITHER = 'either'           # oracle: both placements completed and their values differ by no more than the noise
 
 
+def elapsed_time(rows: Sequence[Dict[str, str]], resume_gap: float = 120.0) -> float:
+    """Wall-clock time [s] the runs took from the first one's start to the last one's end, what happens between
+    runs (evaluation, learning, the next link) included; a gap longer than a run plus ``resume_gap`` (a campaign
+    stopped and resumed later) counts as that run only. 0 without timed rows."""
+    runs = sorted((_f(r, 'wall_start'), _f(r, 'wall_time')) for r in rows)
+    runs = [(s, w) for s, w in runs if math.isfinite(s) and math.isfinite(w)]
+    if not runs:
+        return 0.0
+    total = runs[-1][1]
+    for (s0, w0), (s1, _) in zip(runs, runs[1:]):
+        total += s1 - s0 if s1 - s0 <= w0 + resume_gap else w0
+    return total
+
+
 def noise_tolerance(control: ControlValues) -> float:
     """How far apart two runs' Eq. 4-5 values can be by run-to-run noise alone (95 %): a value's sd is
     sqrt((sd_T / CT)^2 + (sd_B / CB)^2) / 2 by the control runs, two runs' difference sqrt(2) times that."""
