@@ -351,24 +351,33 @@ def test_a_cut_off_instance_pauses_and_resumes_and_a_frozen_one_takes_its_goal_b
     assert_clean(c, 'C')
 
 
-def test_a_goal_and_a_cancel_sent_while_no_instance_is_active_are_taken_up_by_the_next(world):
-    """The action server as two instances use it (two servers on one action name, over real TCPROS; the
-    simulator's clock): A active, B prepared (a standby). A goal A finished, a goal A is pursuing when it is
-    frozen, then — no instance active — a cancel of that goal and a new goal. B, promoted with A's state,
-    takes the pursued goal over, replays exactly the cancel and the new goal (not the finished one), and the
-    client's newest goal ends SUCCEEDED from B."""
-    import actionlib
-    from actionlib_msgs.msg import GoalStatus
-    from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
-    from cnr_navigation.action_server import TakeoverActionServer
-    ns = '/takeover_gap_test'
-    ran, finish, servers = [], set(), {}
+class TakeoverPair:
+    """Two action servers on one action name, as two instances use it (over real TCPROS in this process, on the
+    simulator's clock): A started, B prepared (a standby); an execute callback that records which server runs
+    which goal and ends a goal when the test says so."""
 
-    def execute(name):
+    def __init__(self, ns: str) -> None:
+        import actionlib
+        from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
+        from cnr_navigation.action_server import TakeoverActionServer
+        self.ran, self.finish = [], set()
+        self.servers = {name: TakeoverActionServer(ns, MoveBaseAction, self._execute(name)) for name in 'ab'}
+        self.a, self.b = self.servers['a'], self.servers['b']
+        self.b.prepare()
+        self.a.start_with([])
+        self.client = actionlib.ActionClient(ns, MoveBaseAction)
+        self.goal = MoveBaseGoal()
+        self.goal.target_pose.header.frame_id = 'map'
+        self.goal.target_pose.pose.orientation.w = 1.0
+        wait_until(lambda: self.client.wait_for_server(rospy.Duration(0.2)), 30, 'the action server')
+        wait_until(lambda: self.a.action_server.goal_sub.get_num_connections() >= 1 and
+                   self.b.action_server.goal_sub.get_num_connections() >= 1, 30, 'both servers connected')
+
+    def _execute(self, name):
         def cb(_goal):
-            server = servers[name]
+            server = self.servers[name]
             gid = server.current_goal.get_goal_id().id
-            ran.append((name, gid))
+            self.ran.append((name, gid))
             while not rospy.core.is_shutdown():
                 if not server.started:                    # released (frozen): no terminal status
                     with server.action_server.lock, server.lock:
@@ -376,65 +385,99 @@ def test_a_goal_and_a_cancel_sent_while_no_instance_is_active_are_taken_up_by_th
                 if server.is_preempt_requested():
                     server.set_preempted()
                     return
-                if gid in finish:
+                if gid in self.finish:
                     server.set_succeeded()
                     return
                 time.sleep(0.02)
         return cb
-    servers['a'] = TakeoverActionServer(ns, MoveBaseAction, execute('a'))
-    servers['b'] = TakeoverActionServer(ns, MoveBaseAction, execute('b'))
-    a, b = servers['a'], servers['b']
-    b.prepare()
-    a.start_with([])
-    client = actionlib.ActionClient(ns, MoveBaseAction)
-    try:
-        wait_until(lambda: client.wait_for_server(rospy.Duration(0.2)), 30, 'the action server')
-        wait_until(lambda: a.action_server.goal_sub.get_num_connections() >= 1 and
-                   b.action_server.goal_sub.get_num_connections() >= 1, 30, 'both servers connected')
-        g = MoveBaseGoal()
-        g.target_pose.header.frame_id = 'map'
-        g.target_pose.pose.orientation.w = 1.0
-        h0 = client.send_goal(g)
-        gid0 = h0.comm_state_machine.action_goal.goal_id.id
-        wait_until(lambda: ('a', gid0) in ran, 30, 'A running the first goal')
-        finish.add(gid0)
-        wait_until(lambda: h0.get_goal_status() == GoalStatus.SUCCEEDED, 30, 'the first goal to succeed')
-        h1 = client.send_goal(g)
-        gid1 = h1.comm_state_machine.action_goal.goal_id.id
-        wait_until(lambda: ('a', gid1) in ran, 30, 'A running the second goal')
-        wait_until(lambda: len(b._parked) >= 2, 30, 'B to park the goals it received as a standby')
 
-        # ---- A frozen: its state (the pursued goal, what it received), then its server released
-        with a.action_server.lock, a.lock:
-            seen_goals, seen_cancels = a.seen()
-            active = a.current_goal.goal
-        a.release()
-        assert gid0 in seen_goals and gid1 in seen_goals
-        # ---- the gap: a cancel of the pursued goal and a new goal reach no active instance
-        h1.cancel()
-        h2 = client.send_goal(g)
-        gid2 = h2.comm_state_machine.action_goal.goal_id.id
-        wait_until(lambda: len(b._parked) >= 4, 30, 'B to park the cancel and the new goal')
-        assert not [r for r in ran if r[1] == gid2]
+    def send(self):
+        h = self.client.send_goal(self.goal)
+        return h, h.comm_state_machine.action_goal.goal_id.id
 
-        # ---- B promoted with A's state
-        replayed = b.start_with([(active, 'active', False)], seen_goals, seen_cancels)
-        assert replayed == [f'cancel {gid1}', f'goal {gid2}'], replayed
-        wait_until(lambda: ('b', gid2) in ran, 30, 'B running the goal sent in the gap')
-        finish.add(gid2)
-        wait_until(lambda: h2.get_goal_status() == GoalStatus.SUCCEEDED, 30, 'the gap goal to succeed from B')
-        assert ('b', gid0) not in ran                      # the finished goal is not run again
-        assert h1.get_goal_status() in (GoalStatus.PREEMPTED, GoalStatus.PREEMPTING), h1.get_goal_status()
-        # B's own record carries on what A received: a next hand-over knows it too
-        assert {gid0, gid1, gid2} <= set(b.seen()[0])
-    finally:
-        for server in servers.values():
+    def freeze_a(self):
+        """A's state (the pursued goal, what it received), then its server released."""
+        with self.a.action_server.lock, self.a.lock:
+            seen = self.a.seen()
+            active = self.a.current_goal.goal
+        self.a.release()
+        return active, seen
+
+    def close(self) -> None:
+        for server in self.servers.values():
             server.release()
             server.action_server.goal_sub.unregister()
             server.action_server.cancel_sub.unregister()
             for pub in (server.action_server.status_pub, server.action_server.result_pub,
                         server.action_server.feedback_pub):
                 pub.unregister()
+
+
+@pytest.fixture
+def pair(world, request):
+    p = TakeoverPair('/takeover_' + request.node.name[:40])
+    yield p
+    p.close()
+
+
+def test_a_goal_and_a_cancel_sent_while_no_instance_is_active_are_taken_up_by_the_next(pair):
+    """A goal A finished, a goal A is pursuing when it is frozen, then — no instance active — a cancel of that
+    goal and a new goal. B, promoted with A's state, takes the pursued goal over, replays exactly the cancel and
+    the new goal (not the finished one), and the client's newest goal ends SUCCEEDED from B."""
+    from actionlib_msgs.msg import GoalStatus
+    a, b, ran = pair.a, pair.b, pair.ran
+    h0, gid0 = pair.send()
+    wait_until(lambda: ('a', gid0) in ran, 30, 'A running the first goal')
+    pair.finish.add(gid0)
+    wait_until(lambda: h0.get_goal_status() == GoalStatus.SUCCEEDED, 30, 'the first goal to succeed')
+    h1, gid1 = pair.send()
+    wait_until(lambda: ('a', gid1) in ran, 30, 'A running the second goal')
+    wait_until(lambda: len(b._parked) >= 2, 30, 'B to park the goals it received as a standby')
+
+    active, (seen_goals, seen_cancels) = pair.freeze_a()
+    assert gid0 in seen_goals and gid1 in seen_goals
+    # ---- the gap: a cancel of the pursued goal and a new goal reach no active instance
+    h1.cancel()
+    h2, gid2 = pair.send()
+    wait_until(lambda: len(b._parked) >= 4, 30, 'B to park the cancel and the new goal')
+    assert not [r for r in ran if r[1] == gid2]
+
+    # ---- B promoted with A's state
+    replayed = b.start_with([(active, 'active', False)], seen_goals, seen_cancels)
+    assert replayed == [f'cancel {gid1}', f'goal {gid2}'], replayed
+    wait_until(lambda: ('b', gid2) in ran, 30, 'B running the goal sent in the gap')
+    pair.finish.add(gid2)
+    wait_until(lambda: h2.get_goal_status() == GoalStatus.SUCCEEDED, 30, 'the gap goal to succeed from B')
+    assert ('b', gid0) not in ran                      # the finished goal is not run again
+    assert h1.get_goal_status() in (GoalStatus.PREEMPTED, GoalStatus.PREEMPTING), h1.get_goal_status()
+    # B's own record carries on what A received: a next hand-over knows it too
+    assert {gid0, gid1, gid2} <= set(b.seen()[0])
+
+
+def test_a_goal_the_active_instance_missed_is_taken_up_with_the_cancel_it_did_receive(pair):
+    """A goal that reached only the standby (lost to the active instance: seen in a campaign, a fresh cloud
+    clone whose subscription to the client was still connecting), then the client's cancel-all, which A did
+    receive. B, promoted, takes the goal up *and* applies that cancel to it: the goal ends cancelled and is
+    never driven (it was driven, 12 s across the corridor, before this rule)."""
+    from actionlib_msgs.msg import GoalStatus
+    from move_base_msgs.msg import MoveBaseActionGoal
+    a, b, ran = pair.a, pair.b, pair.ran
+    lost = MoveBaseActionGoal()                           # as the client would send it, delivered to B only
+    lost.header.stamp = rospy.Time.now()
+    lost.goal_id.stamp, lost.goal_id.id = lost.header.stamp, '/client-lost-1'
+    lost.goal = pair.goal
+    b.action_server.internal_goal_callback(lost)
+    pair.client.cancel_all_goals()
+    wait_until(lambda: len(b._parked) >= 2 and a.seen()[1], 30, 'the cancel at both servers')
+    _, (seen_goals, seen_cancels) = pair.freeze_a()
+    assert '/client-lost-1' not in seen_goals
+    replayed = b.start_with([], seen_goals, seen_cancels)
+    assert replayed == ['goal /client-lost-1', 'cancel /client-lost-1'], replayed
+
+    def status():
+        return {s.status.goal_id.id: s.status.status for s in b.action_server.status_list}.get('/client-lost-1')
+    # cancelled before B's execute thread could run it (RECALLED), or the moment it started (PREEMPTED)
+    wait_until(lambda: status() in (GoalStatus.RECALLED, GoalStatus.PREEMPTED), 10, 'the lost goal cancelled')
 
 
 def node_subscriptions(node: str) -> set:

@@ -18,6 +18,7 @@ import time
 from typing import Dict, List, Optional
 
 import actionlib
+from actionlib.action_client import CommState
 import rospy
 from actionlib_msgs.msg import GoalStatus, GoalStatusArray
 from geometry_msgs.msg import Pose2D
@@ -49,6 +50,8 @@ class TaskRunner:
             from cnr_testbed.api import Testbed
             self.testbed = Testbed(testbed)
         self.server_timeout = p.number('server_timeout', positive=True)
+        self.goal_ack_timeout = p.number('goal_ack_timeout', positive=True)
+        self.last_sent = 0.0                        # wall time the current goal was (last) sent
         self.decide_timeout = p.number('decide_timeout', positive=True)
         decider = p.string('decider').rstrip('/')
         self.decide = rospy.ServiceProxy(f'{decider}/decide', Decide)
@@ -79,6 +82,19 @@ class TaskRunner:
         print(f'[task {rospy.Time.now().to_sec():7.1f} s] {text}', flush=True)
 
     # ---------------------------------------------------------------- one run
+    def _resend_unacknowledged(self, sent: float) -> None:
+        """actionlib sends a goal once: one that no move_base status has acknowledged within goal_ack_timeout
+        (lost to an instance whose subscription to this node was still connecting, e.g. a clone just promoted
+        across a slow link) is sent again, same goal id and stamp (a server that has it ignores the copy)."""
+        gh = self.client.gh
+        if gh is None or gh.get_comm_state() != CommState.WAITING_FOR_GOAL_ACK:
+            return
+        if time.monotonic() - self.last_sent >= self.goal_ack_timeout:
+            self.last_sent = time.monotonic()
+            self.client.action_client.pub_goal.publish(gh.comm_state_machine.action_goal)
+            self.say(f'goal {gh.comm_state_machine.action_goal.goal_id.id} not acknowledged after '
+                     f'{time.monotonic() - sent:.1f} s: sent again')
+
     def drive(self) -> List[str]:
         """Each goal in turn; the outcomes (stops at the first that did not succeed)."""
         outcomes: List[str] = []
@@ -91,8 +107,10 @@ class TaskRunner:
             o.z, o.w = math.sin(yaw / 2.0), math.cos(yaw / 2.0)
             self.client.send_goal(goal)
             t0 = rospy.Time.now().to_sec()
+            sent = self.last_sent = time.monotonic()
             outcome = None
             while outcome is None and not rospy.is_shutdown():
+                self._resend_unacknowledged(sent)
                 state = self.client.get_state()
                 if state == GoalStatus.SUCCEEDED:
                     # the status array says so before the result message comes: take the result too (bounded),

@@ -36,6 +36,15 @@ SEEN = 64            # goal ids and cancels a started server remembers (the newe
 CancelKey = Tuple[str, int, int]      # a cancel request: goal id ('' = all), stamp secs, nsecs
 
 
+def cancels(cancel: GoalID, goal: GoalID) -> bool:
+    """Does ``cancel`` apply to ``goal``? actionlib's rule (``ActionServer.internal_cancel_callback``): every goal
+    if its id is empty and its stamp zero, the goal of its id, and every goal stamped at or before a non-zero
+    stamp."""
+    zero = rospy.Time()
+    return ((not cancel.id and cancel.stamp == zero) or cancel.id == goal.id
+            or (cancel.stamp != zero and goal.stamp <= cancel.stamp))
+
+
 class TakeoverActionServer(actionlib.SimpleActionServer):
     """SimpleActionServer (never auto-started) with :meth:`start_with` and :meth:`release`."""
 
@@ -162,16 +171,24 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
                     self._adopted = handle
                 elif cancel:
                     type(a).internal_cancel_callback(a, GoalID(id=action_goal.goal_id.id))
-            replayed = []
+            replayed: List[str] = []
+            taken: List[GoalID] = []                  # goals replayed here, in arrival order
             goals_known, cancels_known = set(self._seen_goals), set(self._seen_cancels)
             parked, self._parked = list(self._parked), deque(maxlen=PARKED)
-            for kind, msg in parked:                  # sent while no instance was active: nobody took it
-                if kind == 'goal' and msg.goal_id.id not in goals_known:
-                    self._on_goal(msg)
-                    replayed.append(f'goal {msg.goal_id.id}')
-                elif kind == 'cancel' and self._cancel_key(msg) not in cancels_known:
-                    self._on_cancel(msg)
+            for kind, msg in parked:
+                if kind == 'goal':
+                    if msg.goal_id.id not in goals_known:    # sent while no instance was active, or lost to the
+                        self._on_goal(msg)                   # one that was: nobody took it
+                        taken.append(msg.goal_id)
+                        replayed.append(f'goal {msg.goal_id.id}')
+                elif self._cancel_key(msg) not in cancels_known:
+                    self._on_cancel(msg)                     # as the instance before would have applied it
                     replayed.append(f'cancel {msg.id or "all"}')
+                else:       # the instance before had this cancel but not a goal taken up above: it applies to it
+                    for gid in taken:
+                        if cancels(msg, gid):
+                            type(a).internal_cancel_callback(a, GoalID(id=gid.id))
+                            replayed.append(f'cancel {gid.id}')
             a.publish_status()
         return replayed
 
