@@ -11,7 +11,8 @@
 #   launch_scripts/exp_campaign.sh [--conditions 100] [--seed 1] [--out DIR] [--test-fraction 0.3]
 #                                  [--rtt-min 0 --rtt-max 200 --rate-min 0.5 --rate-max 50 --loss-min 0
 #                                   --loss-max 0.05] [--settle 6] [--port 11411]
-#   launch_scripts/exp_campaign.sh --analyse-only [--out DIR]    # the analysis and figures of the rows so far
+#   launch_scripts/exp_campaign.sh --analyse-only [--out DIR] [--exclude c0017,...]   # the analysis and figures
+#                                  of the rows so far (--exclude: conditions left out, named in campaign.md)
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 case "${1:-}" in -h|--help) cnr_help; exit 0 ;; esac

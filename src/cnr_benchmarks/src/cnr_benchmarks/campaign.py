@@ -206,6 +206,8 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
             p.add_argument('--conditions', type=int, default=100)
             p.add_argument('--seed', type=int, default=1)
             p.add_argument('--test-fraction', type=float, default=0.3, help='conditions held out (the last ones)')
+            p.add_argument('--exclude', default='', help='conditions left out of the analysis (comma-separated '
+                                                         'ids, e.g. runs known to be corrupted; campaign.md says so)')
             for k, v in (('rtt-min', 0.0), ('rtt-max', 200.0), ('rate-min', 0.5), ('rate-max', 50.0),
                          ('loss-min', 0.0), ('loss-max', 0.05)):
                 p.add_argument(f'--{k}', type=float, default=v)

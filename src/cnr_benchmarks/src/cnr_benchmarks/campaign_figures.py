@@ -41,6 +41,12 @@ def write_analysis(args: argparse.Namespace) -> int:
     rows, warnings = read_results(results)
     for w in warnings:
         print(w, file=sys.stderr)
+    excluded = sorted({c for c in args.exclude.split(',') if c})
+    unknown = [c for c in excluded if c not in {r['condition'] for r in rows}]
+    if unknown:
+        print(f'campaign analyse: --exclude: no such condition in {results}: {", ".join(unknown)}', file=sys.stderr)
+        return 2
+    rows = [r for r in rows if r['condition'] not in excluded]
     if not rows:
         print(f'campaign analyse: no results in {results}', file=sys.stderr)
         return 1
@@ -256,7 +262,8 @@ def write_analysis(args: argparse.Namespace) -> int:
         f'# Continuous experiment (thesis §5)\n',
         f'`launch_scripts/exp_campaign.sh {" ".join(args.argv)}`: {len(rows)} runs, {len(pairs)} paired conditions '
         f'({n_train} training, {n_test} held out), {wall / 3600:.2f} h of runs; control values: CT '
-        f'{control.ct_mean:.2f} s, CB {control.cb_mean:.6f} ({control.runs} runs, {control.date}).\n',
+        f'{control.ct_mean:.2f} s, CB {control.cb_mean:.6f} ({control.runs} runs, {control.date}).'
+        + (f' Left out (--exclude): {", ".join(excluded)}.' if excluded else '') + '\n',
         budget,
         'Runs by placement and status: ' + ', '.join(f'{d} {s}: {n}' for (d, s), n in sorted(statuses.items()))
         + '\n',
