@@ -46,7 +46,7 @@ def write_analysis(args: argparse.Namespace) -> int:
     if unknown:
         print(f'campaign analyse: --exclude: no such condition in {results}: {", ".join(unknown)}', file=sys.stderr)
         return 2
-    rows = [r for r in rows if r['condition'] not in excluded]
+    all_rows, rows = rows, [r for r in rows if r['condition'] not in excluded]
     if not rows:
         print(f'campaign analyse: no results in {results}', file=sys.stderr)
         return 1
@@ -246,12 +246,13 @@ def write_analysis(args: argparse.Namespace) -> int:
               f'conditions in {_fmt(100 * pair_wall / 3600, 2)} h; onload run {med_of(onload_rows, "wall_time")} s '
               f'(task {med_of(onload_rows, "t_task")} s), offload run {med_of(offload_rows, "wall_time")} s (task '
               f'{med_of(offload_rows, "t_task")} s, placing {med_of(offload_rows, "placing_time")} s).')
-    elapsed = core.elapsed_time(rows)
-    if pairs and elapsed > 0:
+    elapsed = core.elapsed_time(all_rows)                 # every condition run, left out or not
+    n_run = len({r['condition'] for r in all_rows})
+    if n_run and elapsed > 0:
         budget += (f" Elapsed from the first run's start to the last one's end, the evaluation and learning between "
                    f'runs included (the pause of a stopped and resumed campaign left out): {_fmt(elapsed / 3600, 2)} h '
-                   f'for {len(pairs)} conditions, {_fmt(elapsed / len(pairs))} s each, i.e. 100 in '
-                   f'{_fmt(100 * elapsed / len(pairs) / 3600, 2)} h.')
+                   f'for {n_run} conditions, {_fmt(elapsed / n_run)} s each, i.e. 100 in '
+                   f'{_fmt(100 * elapsed / n_run / 3600, 2)} h.')
     budget += '\n'
     def pct(k: int, n: int) -> str:
         return f'{k}/{n} ({_fmt(100 * k / max(n, 1), 0)} %)'
