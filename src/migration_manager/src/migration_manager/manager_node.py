@@ -291,8 +291,8 @@ class Manager:
             rospy.logerr(f'{m.module}: reinstating {host} failed: {res if not ok else res.message}')
             return []
         if verb == 'retire':
-            if (detail == 'cold' or m.module not in self.cfg.hot_standby) and \
-                    host in self.cfg.dormant.get(m.module, ()):
+            cold = detail == 'cold' or m.module not in self.cfg.hot_standby
+            if cold and host in self.cfg.dormant.get(m.module, ()):
                 ok, res = self.control[(m.module, host)].call(command='sleep')
                 if ok and res.ok:
                     rospy.loginfo(f'{m.module}: the retired instance on {host} sleeps (dormant)')
@@ -300,7 +300,7 @@ class Manager:
                     rospy.logwarn(f'{m.module}: the retired instance on {host} did not go dormant '
                                   f'({res if not ok else res.message}): stopping it')
                     self._call(self.agents[host], 'stop', m.module)
-            elif detail == 'cold' or m.module not in self.cfg.hot_standby:
+            elif cold:
                 self._call(self.agents[host], 'stop', m.module)
             else:                     # hot: the old instance makes way for a fresh standby there
                 self._call(self.agents[host], 'stop', m.module)
