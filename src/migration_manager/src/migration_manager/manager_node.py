@@ -349,6 +349,10 @@ class Manager:
     def start_modules(self) -> None:
         """The initial placement; a module the cloud cannot take (link down) starts on the robot."""
         def start(module: str, host: str) -> None:
+            try:                     # the agent there may still be starting (it resolves its launches first)
+                self.agents[host].wait_for_service(self.cfg.timeouts.start)
+            except rospy.ROSException:
+                rospy.logwarn(f'{module}: the agent on {host} is not there after {self.cfg.timeouts.start:g} s')
             _, m = self.run_migration(module, host, 'cold')
             if m.step is not Step.DONE and host != self.cfg.authority:
                 rospy.logwarn(f'{module}: cannot start on {host} ({m.error}): starting it on {self.cfg.authority}')
