@@ -227,6 +227,7 @@ class Bench:
             else:
                 report.progress(f'  (could not end the mission through ~finish: {res.stderr.strip()[-200:]})')
         self.mission.stop(timeout=120)
+        self.robot.stop()                      # the probe (it outlived the bench before)
         return json.load(open(path)) if os.path.exists(path) else {}
 
 
