@@ -3,8 +3,9 @@
 One per host, on that host's master. It only starts modules in its configured list, each as a *standby*: the
 node that ``<launch_package> <launch_file> <module>:=true migration_role:=standby ...`` (normally cnr_mission
 modules.launch) launches, resolved with roslaunch's loader (checked at start-up, again for each instance) and
-started directly, without a launch parent per instance (:mod:`migration_manager.instance_launch`): its parameters set on the master, then
-its process, in its own process group, output in ``<log_dir>/<host>-<module>-<n>.log``; promotion and freezing are the manager's business with the instance
+started directly, without a launch parent per instance (:mod:`migration_manager.instance_launch`): its
+parameters set on the master, then its process, in its own process group, output in
+``<log_dir>/<host>-<module>-<n>.log``; promotion and freezing are the manager's business with the instance
 itself. An instance that exits while it is wanted here (crashed, or superseded after an outage) is started
 again as a standby after ``restart_delay``.
 """
