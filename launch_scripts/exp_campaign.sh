@@ -6,11 +6,13 @@
 # Then the analysis: the decisions against the oracle of the paired runs, the learning curve beside the best
 # static threshold, and Figures 5-1 to 5-6 beside the thesis's numbers (bench_results/campaign/campaign.md). Needs the control values
 # (exp_control.sh) and root; uses the default testbed. Rows are appended as measured; run it again to resume.
-# About 80 s per condition (median 79 s, 2026-11-26).
+# About 65 s per condition (68 conditions in 1.24 h, 2026-11-26). --slowdown S: the robot's CPU capped at 1/S
+# instead of config/testbed.yaml's (a copy of config/ in <out>/slowdown_<S>), with the control values of
+# exp_control.sh --slowdown S (config/control_values_slowdown<S>.yaml).
 #
 #   launch_scripts/exp_campaign.sh [--conditions 100] [--seed 1] [--out DIR] [--test-fraction 0.3]
 #                                  [--rtt-min 0 --rtt-max 200 --rate-min 0.5 --rate-max 50 --loss-min 0
-#                                   --loss-max 0.05] [--settle 6] [--port 11411]
+#                                   --loss-max 0.05] [--settle 6] [--port 11411] [--slowdown S]
 #   launch_scripts/exp_campaign.sh --analyse-only [--out DIR] [--exclude c0017,...]   # the analysis and figures
 #                                  of the rows so far (--exclude: conditions left out, named in campaign.md)
 set -euo pipefail

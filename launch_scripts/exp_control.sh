@@ -9,8 +9,11 @@
 # decision) runs whole two-host missions instead, as the main job measures them (T to the hotspot, B until
 # then), with the link of --link-map (default config/link_map_<location>.yaml); about 4 minutes each.
 #
+# --slowdown S measures them with the robot's CPU capped at 1/S (default config/testbed.yaml's robot_cpu.slowdown):
+# written to config/control_values_slowdown<S>.yaml, rows in bench_results/control/<task>@<location>_slowdown<S>.
+#
 #   launch_scripts/exp_control.sh [--runs 20] [--task T] [--location L] [--out DIR] [--control-values FILE]
-#                                 [--settle 6] [--port 11411] [--link-map FILE]
+#                                 [--settle 6] [--port 11411] [--link-map FILE] [--slowdown S]
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 case "${1:-}" in -h|--help) cnr_help; exit 0 ;; esac

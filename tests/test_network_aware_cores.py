@@ -169,6 +169,21 @@ def test_results_are_appended_and_a_torn_line_is_reported(tmp_path):
     assert len(warnings) == 1 and 'results.tsv:3' in warnings[0]
 
 
+def test_the_local_remote_plan_alternates_forced_placements_and_its_spread_counts_completed_runs(tmp_path):
+    p = tmp_path / 'plan.yaml'
+    p.write_text(yaml.safe_dump(campaign.local_remote_plan('corridor_round_trip', 'corridor', 6.0, 3)))
+    plan = load_plan(str(p))
+    assert [r.force for r in plan.runs] == [ONLOAD, OFFLOAD] * 3
+    assert all(r.decide and not r.learn and not r.explore and r.link is None for r in plan.runs)
+    rows = [dict(force=ONLOAD, mission_status=COMPLETED, t_task='20'),
+            dict(force=ONLOAD, mission_status=COMPLETED, t_task='24'),
+            dict(force=ONLOAD, mission_status=TIMED_OUT, t_task='90'),
+            dict(force=OFFLOAD, mission_status=COMPLETED, t_task='19')]
+    on, off = campaign.spread(rows, ONLOAD, 't_task'), campaign.spread(rows, OFFLOAD, 't_task')
+    assert (on.n, on.runs, on.mean) == (2, 3, 22.0) and on.sd == pytest.approx(2 ** 1.5)
+    assert (off.n, off.mean) == (1, 19.0) and math.isnan(off.sd)
+
+
 # ---------------------------------------------------------------- campaign
 def test_elapsed_time_counts_what_happens_between_runs_but_not_a_resume_pause():
     rows = [dict(wall_start='100', wall_time='40'), dict(wall_start='145', wall_time='30'),
@@ -299,3 +314,24 @@ def test_control_results_go_per_task_and_location():
     from cnr_benchmarks import campaign as script
     assert script.parse_args(['control', '--task', 'patrol']).out.endswith('bench_results/control/patrol@corridor')
     assert script.parse_args(['campaign']).out.endswith('bench_results/campaign')
+
+
+def test_a_slowdown_has_its_own_results_control_values_and_config_copy(tmp_path):
+    """--slowdown S: rows, control values and the testbed configuration of that robot CPU cap, never the
+    default's; a slowdown below 1 is refused in one line."""
+    from cnr_benchmarks import campaign as script
+    from cnr_testbed.core.config import load_testbed
+    a = script.parse_args(['control', '--slowdown', '6'])
+    assert a.out.endswith('control/corridor_round_trip@corridor_slowdown6')
+    assert a.control_values.endswith('config/control_values_slowdown6.yaml')
+    assert script.parse_args(['campaign']).control_values.endswith('config/control_values.yaml')
+    lr = script.parse_args(['local_remote'])
+    default = load_testbed(os.path.join(script.report.WS, 'config', 'testbed.yaml')).robot_cpu.slowdown
+    assert lr.slowdowns == [default, 2 * default] and lr.out.endswith('bench_results/local_remote')
+    cfg = script.slowdown_config(str(tmp_path), 6.5)
+    assert load_testbed(os.path.join(cfg, 'testbed.yaml')).robot_cpu.cpus == pytest.approx(1 / 6.5)
+    assert os.path.exists(os.path.join(cfg, 'migration.yaml'))
+    with pytest.raises(SystemExit):
+        script.parse_args(['campaign', '--slowdown', '0.5'])
+    with pytest.raises(SystemExit):
+        script.parse_args(['local_remote', '--slowdowns', '3,x'])

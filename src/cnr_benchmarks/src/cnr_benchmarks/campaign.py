@@ -3,6 +3,7 @@
     /usr/bin/python3 -m cnr_benchmarks.campaign control [--runs 20] [--out bench_results/control]
     /usr/bin/python3 -m cnr_benchmarks.campaign campaign [--conditions 100] [--seed 1] [--out bench_results/campaign]
     /usr/bin/python3 -m cnr_benchmarks.campaign analyse [--out bench_results/campaign]
+    /usr/bin/python3 -m cnr_benchmarks.campaign local_remote [--runs 20] [--slowdowns 3,6]
 
 Both run the two-host testbed in task mode (``two_host_mission --task-plan``): one session, the task_runner
 runs the plan's tasks one after the other (config/scenarios/<location>.yaml ``tasks``), move_base managed by
@@ -22,6 +23,11 @@ profiled once with the modules on the robot, decided by the robot's policy and r
 robot's training set starts empty in ``<out>/training`` (cold start, then k-NN as it learns). Then
 ``analyse``: the learning curve against the oracle beside the best static threshold, and Figures 5-1 to 5-6 in
 ``<out>/``, with campaign.md.
+
+``local_remote`` (thesis Figs. 5-5/5-6): ``--runs`` runs local and as many remote (move_base on the cloud),
+alternating, on the unrestricted link, at each robot CPU slowdown of ``--slowdowns`` (the thesis compared local
+CPU frequencies); local_remote.md and the two figures. ``--slowdown S`` runs control or campaign with the robot
+capped at 1/S CPU: on a copy of config/ in ``<out>/slowdown_<S>`` whose testbed.yaml says so.
 """
 from __future__ import annotations
 
@@ -44,10 +50,11 @@ THESIS_CT, THESIS_CT_SD = 87.9286, 14.3815          # s, Table 4-5
 THESIS_CB, THESIS_CB_SD = 0.004586, 0.000702        # battery fraction, Table 4-5
 
 
-def two_host_argv(location: str, report_dir: str, port: int) -> Optional[List[str]]:
-    """The two_host_mission command for the location's scenario with every module on the robot at the start;
-    None (the scenario's problem printed in one line) when check_scenario refuses it."""
-    cfg_dir = os.path.join(report.WS, 'config')
+def two_host_argv(location: str, report_dir: str, port: int, cfg_dir: Optional[str] = None) -> Optional[List[str]]:
+    """The two_host_mission command for the location's scenario with every module on the robot at the start
+    (the nodes' configuration from ``cfg_dir``, default the workspace's config/); None (the scenario's problem
+    printed in one line) when check_scenario refuses it."""
+    cfg_dir = cfg_dir or os.path.join(report.WS, 'config')
     scenario = os.path.join(cfg_dir, 'scenarios', f'{location}.yaml')
     line = subprocess.run(['rosrun', 'cnr_mission', 'check_scenario', scenario], capture_output=True, text=True)
     if line.returncode != 0:
@@ -59,16 +66,20 @@ def two_host_argv(location: str, report_dir: str, port: int) -> Optional[List[st
             '--port', str(port)]
 
 
-def run_session(args: argparse.Namespace, plan: Dict, results: str, training_dir: str, control_values: str) -> int:
-    """Write the plan and run the two-host task session over it (its output passes through)."""
-    os.makedirs(args.out, exist_ok=True)
-    plan_path = os.path.join(args.out, 'plan.yaml')
+def run_session(args: argparse.Namespace, plan: Dict, results: str, training_dir: str, control_values: str,
+                out: Optional[str] = None, cfg_dir: Optional[str] = None) -> int:
+    """Write the plan and run the two-host task session over it in ``out`` (default ``args.out``; its output
+    passes through)."""
+    out = out or args.out
+    cfg_dir = cfg_dir or getattr(args, 'cfg_dir', None)
+    os.makedirs(out, exist_ok=True)
+    plan_path = os.path.join(out, 'plan.yaml')
     with open(plan_path, 'w') as f:
         yaml.safe_dump(plan, f, sort_keys=False)
-    session = os.path.join(args.out, 'session')
+    session = os.path.join(out, 'session')
     if os.path.exists(session):
         os.replace(session, f'{session}.prev{int(time.time())}')
-    argv = two_host_argv(plan['location'], session, args.port)
+    argv = two_host_argv(plan['location'], session, args.port, cfg_dir)
     if argv is None:
         return 2
     argv += ['--task-plan', plan_path, '--task-results', results, '--training-dir', training_dir,
@@ -142,7 +153,7 @@ def control_missions(args: argparse.Namespace, scenario: str) -> int:
                 os.replace(run, f'{run}.prev{int(time.time())}')
             report.progress(f'[control] run {i}/{args.runs}: {args.task}@{args.location} mission, every module on '
                             f'the robot' + (f', link map {os.path.relpath(link_map, report.WS)}' if link_map else ''))
-            argv = two_host_argv(args.location, run, args.port)
+            argv = two_host_argv(args.location, run, args.port, getattr(args, 'cfg_dir', None))
             if argv is None:
                 return 2
             rc = subprocess.call(argv + ['--migration'] + (['--link-map', link_map] if link_map else []))
@@ -167,6 +178,58 @@ def control_missions(args: argparse.Namespace, scenario: str) -> int:
     return write_control(args, rows)
 
 
+# ---------------------------------------------------------------- local vs remote (Figs. 5-5, 5-6)
+def slowdown_dir(out: str, slowdown: float) -> str:
+    return os.path.join(out, f'slowdown_{slowdown:g}')
+
+
+def slowdown_config(out: str, slowdown: float) -> str:
+    """A copy of the workspace's config/ whose testbed.yaml caps the robot at 1/``slowdown`` CPU (the thesis's
+    "different local CPU frequency"); rewritten on every run so it follows the workspace's configuration."""
+    import shutil
+    dst = os.path.join(slowdown_dir(out, slowdown), 'config')
+    if os.path.exists(dst):
+        shutil.rmtree(dst)
+    shutil.copytree(os.path.join(report.WS, 'config'), dst)
+    path = os.path.join(dst, 'testbed.yaml')
+    with open(path) as f:
+        doc = yaml.safe_load(f)
+    doc['testbed']['robot_cpu'].update(enabled=True, slowdown=slowdown)
+    with open(path, 'w') as f:
+        yaml.safe_dump(doc, f, sort_keys=False)
+    return dst
+
+
+def testbed_running(prog: str) -> bool:
+    """True (said in one line) when a testbed is up: its robot cgroup keeps the cap it was made with, so a
+    ``--slowdown`` would not apply."""
+    from cnr_testbed.api import Testbed
+    if Testbed(os.path.join(report.WS, 'config', 'testbed.yaml')).running():
+        print(f'{prog}: a testbed is running and its robot CPU cap would be used instead of --slowdown\'s: stop it '
+              f'first (launch_scripts/testbed.sh down)', file=sys.stderr)
+        return True
+    return False
+
+
+def local_remote(args: argparse.Namespace) -> int:
+    if testbed_running('exp_local_remote'):
+        return 2
+    rc = 0
+    for s in args.slowdowns:
+        out = slowdown_dir(args.out, s)
+        report.progress(f'[local_remote] robot CPU slowdown {s:g} (cap {1 / s:.3g} CPU): {args.runs} runs local and '
+                        f'{args.runs} remote, alternating; rows in {out}/results.tsv')
+        plan = core.local_remote_plan(args.task, args.location, args.settle, args.runs)
+        rc = run_session(args, plan, os.path.join(out, 'results.tsv'), os.path.join(out, 'training'),
+                         args.control_values, out=out, cfg_dir=slowdown_config(args.out, s))
+        if rc != 0:
+            print(f'exp_local_remote: the session at slowdown {s:g} ended with status {rc}; run the same command '
+                  f'again to resume', file=sys.stderr)
+            break
+    from cnr_benchmarks.campaign_figures import write_local_remote
+    return write_local_remote(args) or rc
+
+
 # ---------------------------------------------------------------- campaign
 def campaign(args: argparse.Namespace) -> int:
     ranges = core.Ranges(args.rtt_min, args.rtt_max, args.rate_min, args.rate_max, args.loss_min, args.loss_max)
@@ -188,7 +251,7 @@ def analyse(args: argparse.Namespace) -> int:
 def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
     ap = argparse.ArgumentParser(prog='campaign', description=__doc__.split('\n')[0])
     sub = ap.add_subparsers(dest='cmd', required=True)
-    for name in ('control', 'campaign', 'analyse'):
+    for name in ('control', 'campaign', 'analyse', 'local_remote'):
         p = sub.add_parser(name)
         p.add_argument('--task', default='corridor_round_trip', help='a task of config/decision.yaml')
         p.add_argument('--location', default='corridor', help='config/scenarios/<location>.yaml')
@@ -197,7 +260,17 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
         p.add_argument('--port', type=int, default=11411, help='master port in both namespaces')
         p.add_argument('--settle', type=float, default=6.0,
                        help='s after setting a link before profiling (the network monitor window is 5 s)')
-        p.add_argument('--control-values', default=os.path.join(report.WS, 'config', 'control_values.yaml'))
+        p.add_argument('--control-values', default=None, help='default config/control_values.yaml')
+        if name == 'local_remote':
+            p.add_argument('--runs', type=int, default=20, help='runs per placement and slowdown')
+            p.add_argument('--slowdowns', default=None,
+                           help='robot CPU slowdowns, comma-separated (default: config/testbed.yaml\'s and twice it)')
+            p.add_argument('--analyse-only', action='store_true', help='the table and figures of the rows so far')
+        else:
+            p.add_argument('--slowdown', type=float, default=None,
+                           help="the robot's CPU slowdown (default config/testbed.yaml's); another one runs on a "
+                                "copy of config/ in <out>/slowdown_<s> and its control values default to "
+                                "config/control_values_slowdown<s>.yaml")
         if name == 'control':
             p.add_argument('--runs', type=int, default=20)
             p.add_argument('--link-map', default=None,
@@ -214,21 +287,52 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
     args = ap.parse_args(argv)
     args.argv = list(argv if argv is not None else sys.argv[1:])
     args.argv.remove(args.cmd)          # the script's own arguments (the subcommand is the script's choice)
+    suffix = f'_slowdown{args.slowdown:g}' if getattr(args, 'slowdown', None) is not None else ''
     if args.out is None:
-        args.out = os.path.join(report.WS, 'bench_results', *(('control', f'{args.task}@{args.location}')
-                                                              if args.cmd == 'control' else ('campaign',)))
+        args.out = os.path.join(report.WS, 'bench_results', *(('control', f'{args.task}@{args.location}{suffix}')
+                                                              if args.cmd == 'control' else
+                                                              ('local_remote',) if args.cmd == 'local_remote'
+                                                              else (f'campaign{suffix}',)))
+    if args.cmd == 'local_remote':
+        args.slowdowns = parse_slowdowns(ap, args.slowdowns)
+    elif args.slowdown is not None and args.slowdown < 1.0:
+        ap.error(f'--slowdown: expected a number >= 1 (1 = a whole core), got {args.slowdown:g}')
+    if args.control_values is None:
+        args.control_values = os.path.join(report.WS, 'config', f'control_values{suffix}.yaml')
     args.out = os.path.abspath(args.out)
     if getattr(args, 'runs', 2) < 2 or getattr(args, 'conditions', 1) < 1:
         ap.error('--runs must be >= 2 and --conditions >= 1')
     return args
 
 
+def parse_slowdowns(ap: argparse.ArgumentParser, text: Optional[str]) -> List[float]:
+    if text is None:
+        from cnr_testbed.core.config import load_testbed
+        s = load_testbed(os.path.join(report.WS, 'config', 'testbed.yaml')).robot_cpu.slowdown
+        return [s, 2 * s]
+    try:
+        values = [float(v) for v in text.split(',') if v.strip()]
+    except ValueError:
+        ap.error(f'--slowdowns: expected comma-separated numbers, got {text!r}')
+    if not values or any(v < 1.0 for v in values):
+        ap.error(f'--slowdowns: expected numbers >= 1 (1 = a whole core), got {text!r}')
+    return values
+
+
 def main(argv: Optional[List[str]] = None) -> int:
     args = parse_args(argv)
+    if args.cmd == 'local_remote' and args.analyse_only:
+        from cnr_benchmarks.campaign_figures import write_local_remote
+        return write_local_remote(args)
     if args.cmd != 'analyse' and os.geteuid() != 0:
         print('campaign: needs root (the testbed\'s network namespaces and TUN devices)', file=sys.stderr)
         return 2
-    return {'control': control, 'campaign': campaign, 'analyse': analyse}[args.cmd](args)
+    if args.cmd in ('control', 'campaign') and args.slowdown is not None:
+        if testbed_running(f'exp_{args.cmd}'):
+            return 2
+        args.cfg_dir = slowdown_config(args.out, args.slowdown)
+    return {'control': control, 'campaign': campaign, 'analyse': analyse,
+            'local_remote': local_remote}[args.cmd](args)
 
 
 if __name__ == '__main__':

@@ -323,3 +323,69 @@ def write_analysis(args: argparse.Namespace) -> int:
     report.write_text(os.path.join(args.out, 'campaign.md'), text)
     print(text, flush=True)
     return 0
+
+
+# ---------------------------------------------------------------- local vs remote (thesis Figs. 5-5, 5-6)
+THESIS_LR_BATTERY_PCT = -10.0       # remote vs local battery per task (thesis §5.1 on Figs. 5-5/5-6)
+THESIS_LR_TIME_S = -2.4             # remote - local task time (2.8 %)
+
+
+def write_local_remote(args: argparse.Namespace) -> int:
+    """local_remote.md, fig5_5_battery.png and fig5_6_time.png in ``args.out`` from the rows of each slowdown
+    (``<out>/slowdown_<s>/results.tsv``): mean and sd per placement of the completed runs, as the thesis's
+    Figs. 5-5/5-6 (bars with different local CPU frequency)."""
+    from cnr_mission.core.task import read_results
+    from network_monitor.core.evaluation import OFFLOAD, ONLOAD
+    from cnr_benchmarks.campaign import slowdown_dir
+    table, bars = [], []
+    for s in args.slowdowns:
+        path = os.path.join(slowdown_dir(args.out, s), 'results.tsv')
+        rows, warnings = read_results(path) if os.path.exists(path) else ([], [])
+        for w in warnings:
+            print(w, file=sys.stderr)
+        if not rows:
+            print(f'exp_local_remote: no results for slowdown {s:g} ({path})', file=sys.stderr)
+            continue
+        t = {p: core.spread(rows, p, 't_task') for p in (ONLOAD, OFFLOAD)}
+        b = {p: core.spread(rows, p, 'b_task') for p in (ONLOAD, OFFLOAD)}
+        dt = t[OFFLOAD].mean - t[ONLOAD].mean
+        db = 100.0 * (b[OFFLOAD].mean - b[ONLOAD].mean) / b[ONLOAD].mean if b[ONLOAD].mean else math.nan
+        bars.append((s, t, b))
+        table.append([f'{s:g} ({1 / s:.3g} CPU)',
+                      f'{t[ONLOAD].n}/{t[ONLOAD].runs}', f'{t[OFFLOAD].n}/{t[OFFLOAD].runs}',
+                      f'{_fmt(t[ONLOAD].mean)} ({_fmt(t[ONLOAD].sd)})', f'{_fmt(t[OFFLOAD].mean)} ({_fmt(t[OFFLOAD].sd)})',
+                      f'{_fmt(dt)} s ({_fmt(100 * dt / t[ONLOAD].mean)} %)',
+                      f'{_fmt(b[ONLOAD].mean, 5)} ({_fmt(b[ONLOAD].sd, 5)})', f'{_fmt(b[OFFLOAD].mean, 5)} ({_fmt(b[OFFLOAD].sd, 5)})',
+                      f'{_fmt(db)} %'])
+    if not bars:
+        return 1
+    for name, key, unit, title in (('fig5_5_battery.png', 2, 'battery used per task [fraction]',
+                                    'Fig. 5-5: battery per task, local vs remote'),
+                                   ('fig5_6_time.png', 1, 'T_task [s]', 'Fig. 5-6: task time, local vs remote')):
+        fig, ax = plt.subplots(figsize=(6.4, 4.8))
+        x = np.arange(len(bars))
+        for j, (p, label) in enumerate(((ONLOAD, 'local (onload)'), (OFFLOAD, 'remote (offload)'))):
+            ax.bar(x + (j - 0.5) * 0.38, [bar[key][p].mean for bar in bars], 0.38,
+                   yerr=[bar[key][p].sd if math.isfinite(bar[key][p].sd) else 0.0 for bar in bars],
+                   capsize=4, label=label)
+        ax.set_xticks(x)
+        ax.set_xticklabels([f'slowdown {bar[0]:g}\n({1 / bar[0]:.3g} CPU)' for bar in bars])
+        ax.set_ylabel(unit)
+        ax.set_title(title + ' (mean, sd)')
+        ax.legend(fontsize=8)
+        fig.tight_layout()
+        fig.savefig(os.path.join(args.out, name), dpi=110)
+        plt.close(fig)
+    md = (f'# Local vs remote move_base (thesis Figs. 5-5, 5-6)\n\n'
+          f'`launch_scripts/exp_local_remote.sh {" ".join(args.argv)}`: {args.task}@{args.location}, the link '
+          f'unrestricted, runs alternating local (every module on the robot) and remote (move_base migrated to '
+          f'the cloud before the task), at each robot CPU slowdown (the robot\'s cgroup capped at 1/slowdown '
+          f'CPU; the thesis compared local CPU frequencies). Mean (sd) of the completed runs.\n\n'
+          + report.markdown_table(['robot slowdown (cap)', 'local done', 'remote done', 'T local [s]',
+                                   'T remote [s]', 'remote − local T', 'B local', 'B remote',
+                                   'remote vs local B'], table)
+          + f'\n\nThesis (20 runs each, unrestricted network, 1.6 GHz): remote {THESIS_LR_BATTERY_PCT:g} % battery, '
+          f'{THESIS_LR_TIME_S:g} s (−2.8 %) task time.\n\nFigures: fig5_5_battery.png, fig5_6_time.png.\n')
+    report.write_text(os.path.join(args.out, 'local_remote.md'), md)
+    print(md, flush=True)
+    return 0

@@ -90,6 +90,36 @@ def control_plan(task: str, location: str, settle: float, runs: int) -> Dict:
                       for i in range(1, runs + 1)])
 
 
+def local_remote_plan(task: str, location: str, settle: float, runs: int) -> Dict:
+    """Thesis Figs. 5-5/5-6: ``runs`` runs per placement on the link as it is (no restriction), alternating
+    onload and offload (so a drift of the machine's load during the session falls on both), placed by the
+    decider (forced), not learned."""
+    plan = []
+    for i in range(1, runs + 1):
+        for placement in (ONLOAD, OFFLOAD):
+            plan.append(dict(id=f'lr-{i:02d}-{placement}', condition=f'lr-{i:02d}', force=placement, decide=True,
+                             learn=False, explore=False, reuse_profile=False))
+    return dict(task=task, location=location, settle=settle, runs=plan)
+
+
+@dataclass(frozen=True)
+class Spread:
+    n: int              # completed runs
+    runs: int           # runs
+    mean: float
+    sd: float           # sample sd (nan below 2)
+
+
+def spread(rows: Sequence[Dict[str, str]], placement: str, key: str) -> Spread:
+    """Mean and sd of ``key`` over the completed runs of one forced placement (local_remote rows)."""
+    mine = [r for r in rows if r.get('force') == placement]
+    v = [_f(r, key) for r in mine if r.get('mission_status') == COMPLETED]
+    v = [x for x in v if math.isfinite(x)]
+    mean = sum(v) / len(v) if v else math.nan
+    sd = math.sqrt(sum((x - mean) ** 2 for x in v) / (len(v) - 1)) if len(v) > 1 else math.nan
+    return Spread(len(v), len(mine), mean, sd)
+
+
 # ---------------------------------------------------------------- results
 def _f(row: Dict[str, str], key: str) -> float:
     try:
