@@ -11,9 +11,12 @@
 #
 # --slowdown S measures them with the robot's CPU capped at 1/S (default config/testbed.yaml's robot_cpu.slowdown):
 # written to config/control_values_slowdown<S>.yaml, rows in bench_results/control/<task>@<location>_slowdown<S>.
+# --from-rows FILE runs nothing: the control values of the all-local runs of a results TSV, e.g. the onload runs
+# of exp_local_remote.sh (bench_results/local_remote/slowdown_<S>/results.tsv: the same task, every module local).
 #
 #   launch_scripts/exp_control.sh [--runs 20] [--task T] [--location L] [--out DIR] [--control-values FILE]
 #                                 [--settle 6] [--port 11411] [--link-map FILE] [--slowdown S]
+#                                 [--from-rows FILE]
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 case "${1:-}" in -h|--help) cnr_help; exit 0 ;; esac

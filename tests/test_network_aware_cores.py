@@ -335,3 +335,26 @@ def test_a_slowdown_has_its_own_results_control_values_and_config_copy(tmp_path)
         script.parse_args(['campaign', '--slowdown', '0.5'])
     with pytest.raises(SystemExit):
         script.parse_args(['local_remote', '--slowdowns', '3,x'])
+
+
+def test_control_values_from_the_all_local_rows_of_a_results_file(tmp_path):
+    """exp_control.sh --from-rows: CT/CB of the completed runs forced onload (or not forced); remote runs and
+    unfinished runs are not control runs."""
+    from cnr_benchmarks import campaign as script
+    from network_monitor.core.evaluation import load_control_values
+    rows = tmp_path / 'results.tsv'
+    for i, (force, status, t, b) in enumerate([(ONLOAD, COMPLETED, 20.0, 0.003), (OFFLOAD, COMPLETED, 10.0, 0.001),
+                                                (ONLOAD, COMPLETED, 22.0, 0.005), (ONLOAD, TIMED_OUT, 90.0, 0.02),
+                                                ('', COMPLETED, 24.0, 0.004)]):
+        append_result(str(rows), dict(id=f'r{i}', condition=f'c{i}', force=force, mission_status=status,
+                                      t_task=t, b_task=b))
+    cv = tmp_path / 'cv.yaml'
+    args = script.parse_args(['control', '--from-rows', str(rows), '--out', str(tmp_path / 'out'),
+                              '--control-values', str(cv)])
+    assert script.control(args) == 0
+    values = load_control_values(str(cv), 'corridor_round_trip')
+    assert values.runs == 3 and values.ct_mean == pytest.approx(22.0) and values.cb_mean == pytest.approx(0.004)
+    assert (tmp_path / 'out' / 'control.md').exists()
+    args = script.parse_args(['control', '--from-rows', str(tmp_path / 'nope.tsv'), '--out', str(tmp_path / 'o2'),
+                              '--control-values', str(tmp_path / 'cv2.yaml')])
+    assert script.control(args) == 2 and not (tmp_path / 'cv2.yaml').exists()

@@ -96,11 +96,29 @@ def control(args: argparse.Namespace) -> int:
         goal_tasks = (yaml.safe_load(f) or {}).get('tasks') or {}
     if args.task not in goal_tasks:
         return control_missions(args, scenario)
+    if args.from_rows:
+        return control_from_rows(args)
     results = os.path.join(args.out, 'results.tsv')
     plan = core.control_plan(args.task, args.location, args.settle, args.runs)
     rc = run_session(args, plan, results, os.path.join(args.out, 'training'), args.control_values)
     rows, _ = read_results(results)
     return write_control(args, rows) or rc
+
+
+def control_from_rows(args: argparse.Namespace) -> int:
+    """The control values of runs already made with every module on the robot (``--from-rows``: a results TSV,
+    e.g. exp_local_remote.sh's onload runs at the same slowdown): its rows forced onload or not forced."""
+    from cnr_mission.core.task import read_results
+    from network_monitor.core.evaluation import ONLOAD
+    if not os.path.exists(args.from_rows):
+        print(f'exp_control: --from-rows: no such file {args.from_rows}', file=sys.stderr)
+        return 2
+    rows, warnings = read_results(args.from_rows)
+    for w in warnings:
+        print(w, file=sys.stderr)
+    local = [r for r in rows if r.get('force') in ('', ONLOAD)]
+    report.progress(f'[control] {len(local)} all-local runs of {len(rows)} in {args.from_rows}')
+    return write_control(args, local)
 
 
 def write_control(args: argparse.Namespace, rows: List[Dict]) -> int:
@@ -127,6 +145,7 @@ def write_control(args: argparse.Namespace, rows: List[Dict]) -> int:
           f'{values.cb_mean:.6f} ({values.cb_std:.6f})']])
     text = (f'# Control values (thesis Table 4-5)\n\n`{values.command}` ({values.date}); every module on the '
             f'robot, {len(rows)} runs, {len(done)} completed. Written to `{args.control_values}`.\n\n{table}\n')
+    os.makedirs(args.out, exist_ok=True)
     report.write_text(os.path.join(args.out, 'control.md'), text)
     print(text, flush=True)
     return 0
@@ -273,6 +292,9 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
                                 "config/control_values_slowdown<s>.yaml")
         if name == 'control':
             p.add_argument('--runs', type=int, default=20)
+            p.add_argument('--from-rows', default=None,
+                           help='no runs: the control values of the all-local rows of this results TSV (e.g. '
+                                'exp_local_remote.sh\'s slowdown_<s>/results.tsv)')
             p.add_argument('--link-map', default=None,
                            help="a monitoring-mission task's link map (default config/link_map_<location>.yaml)")
         else:
