@@ -377,7 +377,8 @@ def write_local_remote(args: argparse.Namespace) -> int:
         fig.savefig(os.path.join(args.out, name), dpi=110)
         plt.close(fig)
     md = (f'# Local vs remote move_base (thesis Figs. 5-5, 5-6)\n\n'
-          f'`launch_scripts/exp_local_remote.sh {" ".join(args.argv)}`: {args.task}@{args.location}, the link '
+          f'`launch_scripts/exp_local_remote.sh {" ".join(args.argv)}` ({len(bars)} slowdown(s) with rows in '
+          f'`slowdown_<s>/results.tsv`, each with its `plan.yaml` and `session/`): {args.task}@{args.location}, the link '
           f'unrestricted, runs alternating local (every module on the robot) and remote (move_base migrated to '
           f'the cloud before the task), at each robot CPU slowdown (the robot\'s cgroup capped at 1/slowdown '
           f'CPU; the thesis compared local CPU frequencies). Mean (sd) of the completed runs.\n\n'
