@@ -14,8 +14,15 @@ class StateError(ValueError):
     """A state that cannot be decoded or does not belong to the module."""
 
 
+#: zlib level: 1, not the default 6. The active instance encodes its state every replicate_period; for a
+#: store of 3000 measurements (387 KB of JSON) level 6 took 20 ms and level 1 3.5 ms of this machine's CPU for
+#: 7 % more bytes (181 vs 194 KB) — on the robot (a third of a CPU) level 6 was 12 % of its CPU at 2 Hz.
+COMPRESSION = 1
+
+
 def encode(module: str, state: Dict[str, Any]) -> bytes:
-    return zlib.compress(json.dumps({'module': module, 'state': state}, separators=(',', ':')).encode(), 6)
+    return zlib.compress(json.dumps({'module': module, 'state': state}, separators=(',', ':')).encode(),
+                         COMPRESSION)
 
 
 def decode(module: str, data: bytes) -> Dict[str, Any]:
