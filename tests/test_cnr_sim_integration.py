@@ -73,6 +73,30 @@ def test_scan_and_odom_rates_in_sim_time(sim):
     assert o[-1].header.frame_id == 'odom' and o[-1].child_frame_id == 'base_footprint'
 
 
+def test_clock_is_published_at_its_configured_frequency(sim):
+    """/clock at the first step at or after every 1/clock_frequency of sim time (config/simulator.yaml), while
+    odom keeps every step."""
+    import yaml
+    from rosgraph_msgs.msg import Clock
+    config = os.path.join(os.path.dirname(__file__), '..', 'config')
+    with open(os.path.join(config, 'simulator.yaml')) as f:
+        frequency = yaml.safe_load(f)['clock_frequency']
+    with open(os.path.join(config, 'robot.yaml')) as f:
+        step = yaml.safe_load(f)['step']
+    stamps, lock = [], threading.Lock()
+
+    def on_clock(msg):
+        with lock:
+            stamps.append(msg.clock.to_sec())
+    sub = rospy.Subscriber('/clock', Clock, on_clock, queue_size=100)
+    wait_until(lambda: len(stamps) > 2 * frequency, 60, f'{2 * frequency} /clock messages')
+    sub.unregister()
+    with lock:
+        gaps = [b - a for a, b in zip(stamps[1:], stamps[2:])]    # the first may follow a message lost to connecting
+    assert len(gaps) >= frequency and all(abs(g - 1.0 / frequency) < step + 1e-6 for g in gaps), gaps
+    assert sum(gaps) / len(gaps) == pytest.approx(1.0 / frequency, abs=step / len(gaps) + 1e-6)   # no drift
+
+
 def test_depth_cloud_rate_size_and_frame(sim):
     """camera/depth/points: 80 x 60 organised float32 x, y, z at 7.4 Hz (sim time), 3.42 Mbit/s on the wire."""
     import io

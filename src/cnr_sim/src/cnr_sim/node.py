@@ -123,6 +123,7 @@ class SimulatorNode:
         self.lock = threading.Lock()
         ns = rospy.get_name()
         self.clock_pub = rospy.Publisher('/clock', Clock, queue_size=10)
+        self.next_clock = 0.0           # sim time of the next /clock message (~clock_frequency)
         self.odom_pub = rospy.Publisher('odom', Odometry, queue_size=10)
         self.gt_pub = rospy.Publisher('base_pose_ground_truth', Odometry, queue_size=10)
         self.scan_pub = rospy.Publisher('scan', LaserScan, queue_size=5)
@@ -234,7 +235,10 @@ class SimulatorNode:
     def publish(self, collision) -> None:
         w, p = self.world, self.p
         stamp = rospy.Time.from_sec(w.time)
-        self.clock_pub.publish(Clock(stamp))
+        if w.time + 1e-9 >= self.next_clock:
+            self.clock_pub.publish(Clock(stamp))
+            period = 1.0 / p.clock_frequency if p.clock_frequency > 0 else 0.0
+            self.next_clock = max(self.next_clock + period, w.time) if period else w.time
         odom = self._odometry(stamp, p.odom_frame, w.odom)
         self.odom_pub.publish(odom)
         self.gt_pub.publish(self._odometry(stamp, p.map_frame, w.pose))

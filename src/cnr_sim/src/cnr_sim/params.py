@@ -25,6 +25,7 @@ CONFIG_FILES = ('simulator.yaml', 'robot.yaml', 'laser.yaml', 'depth_camera.yaml
 class SimulatorParams:
     map_file: str
     real_time_factor: float
+    clock_frequency: float          # Hz of /clock (0: every step)
     initial_pose: Pose2D
     limits: BaseLimits
     world: WorldConfig
@@ -125,6 +126,7 @@ def read_params(p: Section) -> SimulatorParams:
     return SimulatorParams(
         map_file=p.string('map_file'),
         real_time_factor=p.number('real_time_factor', nonnegative=True),
+        clock_frequency=p.number('clock_frequency', nonnegative=True),
         initial_pose=Pose2D(*p.vector('initial_pose', 3)), limits=read_limits(p), world=read_world(p),
         laser=read_laser(p), laser_frame=ls.string('frame_id'), laser_offset_z=ls.vector('offset', 3)[2],
         depth=read_depth_camera(p), depth_enabled=dc.boolean('enabled'), depth_frame=depth_frame,
