@@ -62,8 +62,9 @@ class DeciderNode:
         r = self.cfg.redecision
         rospy.loginfo(f'migration_decider: k = {self.cfg.decision.k}, V_r = {self.cfg.v_r:g}, tasks '
                       f'{", ".join(t + " (" + "/".join(m) + ")" for t, m in self.cfg.tasks.items())}; training sets in '
-                      f'{self.cfg.training_dir}; re-decision: margin {r.margin:g}, dwell {r.dwell:g} s, at most '
-                      f'{r.max_migrations} migration(s) per {r.window:g} s')
+                      f'{self.cfg.training_dir}; re-decision: margin {r.margin:g}, dwell {r.dwell:g} s'
+                      + (f' (clearly better: {r.clear_margin:g}, {r.clear_dwell:g} s)' if r.clear_margin is not None
+                         else '') + f', at most {r.max_migrations} migration(s) per {r.window:g} s')
 
     # ---------------------------------------------------------------- inputs
     def _on_placement(self, msg: Placement) -> None:
