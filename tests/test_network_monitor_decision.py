@@ -319,10 +319,11 @@ def test_a_clearly_better_placement_is_acted_on_within_a_second_a_marginal_one_a
     times = [10.0 + 0.5 * i for i in range(4)]
     out = [r.update(t, OFFLOAD, 1.0) for t in times]
     assert out == [None, OFFLOAD, None, None] and r.placement == OFFLOAD    # 0.5 s after the first clear want
+    assert r.waited == pytest.approx(0.5)
     r = ReDecider(settings, ONLOAD)
     # 4 of 5 votes: the long dwell; a unanimous update in between does not carry over once votes drop again
     out = {t: r.update(t, OFFLOAD, 1.0 if t == 12.0 else 0.8) for t in [10.0 + 0.5 * i for i in range(25)]}
-    assert [t for t, v in out.items() if v] == [20.0]
+    assert [t for t, v in out.items() if v] == [20.0] and r.waited == pytest.approx(10.0)
     r = ReDecider(settings, OFFLOAD)
     assert r.update(0.0, ONLOAD, 1.0) is None and r.update(0.4, OFFLOAD, 1.0) is None     # a dissent resets
     assert r.update(0.6, ONLOAD, 1.0) is None and r.update(1.1, ONLOAD, 1.0) == ONLOAD

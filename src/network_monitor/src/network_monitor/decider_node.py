@@ -84,18 +84,20 @@ class DeciderNode:
         placement, d = switch
         hosts = self.advisor.hosts(running.task, placement)
         rospy.loginfo(f'migration_decider: re-decision during {running.task}@{running.location}: {placement} '
-                      f'(RTT {1000 * msg.rtt:.0f} ms, R_bw {msg.r_bw:.3g}, votes {d.votes or "rule"})')
-        threading.Thread(target=self._redecide, args=(running.task, running.location, placement, d, msg, hosts),
-                         daemon=True).start()
+                      f'(RTT {1000 * msg.rtt:.0f} ms, R_bw {msg.r_bw:.3g}, votes {d.votes or "rule"}; wanted for '
+                      f'{running.redecider.waited:.1f} s)')
+        threading.Thread(target=self._redecide, args=(running.task, running.location, placement, d, msg, hosts,
+                                                      running.redecider.waited), daemon=True).start()
 
     def _redecide(self, task: str, location: str, placement: str, d: Decision, msg: NetworkProfile,
-                  hosts: Dict[str, str]) -> None:
+                  hosts: Dict[str, str], waited: float) -> None:
         try:
             t0 = time.monotonic()
             placed, moved, message = self.place(hosts)
             out = self._message('redecided', task, location, placement, d, profile_of(msg), hosts)
             out.reason, out.placed, out.placing_time, out.migrations, out.message = \
-                REDECISION, placed, time.monotonic() - t0, moved, message
+                REDECISION, placed, time.monotonic() - t0, moved, f'wanted for {waited:.1f} s; {message}'
+
             self.pub.publish(out)
         finally:
             with self.lock:

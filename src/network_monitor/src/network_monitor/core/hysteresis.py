@@ -51,6 +51,7 @@ class ReDecider:
         self.placement = placement
         self.wanted_since: Optional[float] = None   # when the other placement began to be wanted
         self.clear_since: Optional[float] = None    # ... with at least clear_margin
+        self.waited = 0.0                           # s the last switch was wanted for (the dwell it met)
         self._migrations: Deque[float] = deque()
         self._last: Optional[float] = None
 
@@ -94,6 +95,8 @@ class ReDecider:
             (self.clear_since is not None and now - self.clear_since >= s.clear_dwell)
         if not due or self.budget(now) <= 0:
             return None
+        self.waited = now - (self.wanted_since if self.clear_since is None or now - self.wanted_since >= s.dwell
+                             else self.clear_since)
         self.placement = wanted
         self.wanted_since = self.clear_since = None
         self._migrations.append(now)
