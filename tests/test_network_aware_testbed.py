@@ -1,8 +1,11 @@
 """The network-aware decision on the testbed (root): the two-host mission in task mode, network_monitor's
 migration_decider deciding by k-NN before each task, migration_manager placing move_base, the task_runner
 driving the corridor round trip: a good link, a bad one, and the bad one again with the other placement on the
-same profile (the campaign's paired run). About three minutes."""
+same profile (the campaign's paired run); and a link that collapses during the task (mid-task re-decision).
+About five minutes."""
 import os
+import re
+import shutil
 import subprocess
 
 import pytest
@@ -27,34 +30,32 @@ def seed_row(c_l, r_bw, label, i):
                profile_method='probe', value=1.0, good=True, label=label, explored=False, source='local')
 
 
-def test_a_good_link_offloads_and_a_bad_one_onloads_by_knn(tmp_path):
+def seed_training(tmp_path):
+    """Past runs — offloading paid off on fast links, onloading on slow ones (high RTT), whatever the
+    bandwidth — and control values: (training dir, control values file)."""
     training = str(tmp_path / 'training')
-    # past runs: offloading paid off on fast links, onloading on slow ones (high RTT), whatever the bandwidth
     seed = [seed_row(0.002 + 0.001 * i, 500.0 + 100 * i, OFFLOAD, i) for i in range(5)] + \
            [seed_row(0.28 + 0.01 * i, 300.0 + 100 * i, ONLOAD, 10 + i) for i in range(5)] + \
            [seed_row(0.28 + 0.01 * i, 1.1 + 0.1 * i, ONLOAD, 20 + i) for i in range(5)]
     TrainingSet(training, TASK, LOCATION).append(*seed)
     control = str(tmp_path / 'control_values.yaml')
     write_control_values(control, ControlValues(TASK, 30.0, 3.0, 0.003, 0.0003, 20, '2026-11-24', 'test'))
-    plan = dict(task=TASK, location=LOCATION, settle=6.0, runs=[
-        dict(id='good', condition='good', link=dict(delay=1.0, rate=0.0, loss=0.0), force='', decide=True,
-             learn=True, explore=False, reuse_profile=False),
-        dict(id='bad', condition='bad', link=dict(delay=150.0, rate=0.0, loss=0.0), force='', decide=True,
-             learn=True, explore=False, reuse_profile=False),
-        # the paired run of the campaign: the same link, the other placement, decided on the same profile
-        dict(id='bad-offload', condition='bad', link=dict(delay=150.0, rate=0.0, loss=0.0), force=OFFLOAD,
-             decide=True, learn=True, explore=False, reuse_profile=True)])
+    return training, control
+
+
+def run_session(tmp_path, plan, config_dir, training, control, log, *extra):
+    """The two-host task session over ``plan``: (its output, the result rows)."""
     plan_path = tmp_path / 'plan.yaml'
     plan_path.write_text(yaml.safe_dump(plan))
     results = str(tmp_path / 'results.tsv')
     scenario = os.path.join(WS, 'config', 'scenarios', 'corridor.yaml')
     _name, map_file, x, y, a = subprocess.run(['rosrun', 'cnr_mission', 'check_scenario', scenario],
                                               capture_output=True, text=True, check=True).stdout.split()
-    proc = Proc(['rosrun', 'cnr_mission', 'two_host_mission', '--config-dir', os.path.join(WS, 'config'),
+    proc = Proc(['rosrun', 'cnr_mission', 'two_host_mission', '--config-dir', config_dir,
                  '--scenario', scenario, '--map', map_file, '--start', x, y, a, '--placement', 'all_robot',
                  '--report-dir', str(tmp_path / 'session'), '--port', '11411', '--task-plan', str(plan_path),
-                 '--task-results', results, '--training-dir', training, '--control-values', control],
-                os.path.join(LOGS, 'network_aware_testbed.log'))
+                 '--task-results', results, '--training-dir', training, '--control-values', control, *extra],
+                os.path.join(LOGS, log))
     try:
         wait_until(lambda: proc.poll() is not None, 600, 'the task session to end')
     finally:
@@ -63,7 +64,23 @@ def test_a_good_link_offloads_and_a_bad_one_onloads_by_knn(tmp_path):
     assert proc.returncode == 0, out[-3000:]
     assert not os.path.exists('/var/run/netns/robot'), 'the testbed was left up'
     rows, warnings = read_results(results)
-    assert warnings == [] and [r['id'] for r in rows] == ['good', 'bad', 'bad-offload'], out[-3000:]
+    assert warnings == [], warnings
+    return out, rows
+
+
+def test_a_good_link_offloads_and_a_bad_one_onloads_by_knn(tmp_path):
+    training, control = seed_training(tmp_path)
+    plan = dict(task=TASK, location=LOCATION, settle=6.0, runs=[
+        dict(id='good', condition='good', link=dict(delay=1.0, rate=0.0, loss=0.0), force='', decide=True,
+             learn=True, explore=False, reuse_profile=False),
+        dict(id='bad', condition='bad', link=dict(delay=150.0, rate=0.0, loss=0.0), force='', decide=True,
+             learn=True, explore=False, reuse_profile=False),
+        # the paired run of the campaign: the same link, the other placement, decided on the same profile
+        dict(id='bad-offload', condition='bad', link=dict(delay=150.0, rate=0.0, loss=0.0), force=OFFLOAD,
+             decide=True, learn=True, explore=False, reuse_profile=True)])
+    out, rows = run_session(tmp_path, plan, os.path.join(WS, 'config'), training, control,
+                            'network_aware_testbed.log')
+    assert [r['id'] for r in rows] == ['good', 'bad', 'bad-offload'], out[-3000:]
     good, bad, paired = rows
     # good link: the k-NN (5 offload neighbours) offloads, move_base migrates to the cloud and drives from there
     assert (good['decision'], good['reason'], good['placed']) == (OFFLOAD, 'knn', '1'), good
@@ -86,4 +103,38 @@ def test_a_good_link_offloads_and_a_bad_one_onloads_by_knn(tmp_path):
     assert len(learned) == 18 and [r.decision for r in learned[15:]] == [OFFLOAD, ONLOAD, OFFLOAD]
     # B_task from the simulated battery: a few thousandths of a full battery (thesis CB 0.0046 for 88 s)
     assert all(0.0005 < float(r['b_task']) < 0.02 for r in rows[:2]), rows
+    assert 'Traceback' not in out
+
+
+def test_a_link_that_collapses_during_the_task_brings_move_base_home_at_once(tmp_path):
+    """Offloaded on a good link; past x = 2 m the link's RTT becomes 300 ms (a link-quality map): the k-NN's
+    neighbours all say onload, so the re-decision acts after redecision.clear.dwell (0.5 s), not the 10 s
+    dwell, and the goal survives the migration home. The budget's window is cut to 5 s in a copy of config/
+    (the shipped 30 s counts the migration before the task and would hold a 20 s task's re-decision)."""
+    training, control = seed_training(tmp_path)
+    config = str(tmp_path / 'config')
+    shutil.copytree(os.path.join(WS, 'config'), config)
+    with open(os.path.join(config, 'decision.yaml')) as f:
+        decision = yaml.safe_load(f)
+    decision['redecision']['window'] = 5.0
+    with open(os.path.join(config, 'decision.yaml'), 'w') as f:
+        yaml.safe_dump(decision, f, sort_keys=False)
+    link_map = tmp_path / 'link_map.yaml'
+    link_map.write_text(yaml.safe_dump({'link_map': {
+        'direction': 'both',
+        'default': dict(delay=150.0, jitter=0.0, loss=0.0, rate=0.0, queue=1000, outage=False, reorder=False),
+        'regions': [dict(name='near', x=[-12.0, 2.0], y=[-2.0, 2.0], delay=1.0, jitter=0.0, rate=0.0,
+                         outage=False)]}}))
+    plan = dict(task=TASK, location=LOCATION, settle=6.0, runs=[
+        dict(id='collapse', condition='collapse', force='', decide=True, learn=False, explore=False,
+             reuse_profile=False)])
+    out, rows = run_session(tmp_path, plan, config, training, control, 'network_aware_collapse.log',
+                            '--link-map', str(link_map))
+    assert [r['id'] for r in rows] == ['collapse'], out[-3000:]
+    row = rows[0]
+    assert (row['decision'], row['reason']) == (OFFLOAD, 'knn') and float(row['c_l']) < 0.05, row
+    assert row['mission_status'] == COMPLETED and int(row['redecisions']) >= 1, (row, out[-3000:])
+    assert row['placement'].startswith('move_base=cloud>robot'), row
+    waited = [float(w) for w in re.findall(r're-decided during the task: onload at .*?wanted for ([0-9.]+) s', out)]
+    assert waited and waited[0] < decision['redecision']['dwell'], out[-3000:]     # the clear path, not the dwell
     assert 'Traceback' not in out

@@ -299,18 +299,34 @@ def _max_switches_per_window(times, window):
 
 def test_oscillating_link_causes_at_most_one_switch_per_30_s():
     # the wanted placement flips every 5 s (a link around the boundary), decisions every second for 10 min
-    for dwell in (10.0, 4.0, 0.0):
-        r = ReDecider(ReDecisionSettings(0.8, dwell, 1, 30.0), ONLOAD)
+    for dwell, clear in ((10.0, None), (4.0, None), (0.0, None), (10.0, 1.0)):
+        r = ReDecider(ReDecisionSettings(0.8, dwell, 1, 30.0, clear_margin=clear, clear_dwell=0.5), ONLOAD)
         switches = []
         for t in range(600):
             wanted = OFFLOAD if (t // 5) % 2 == 0 else ONLOAD
             if r.update(float(t), wanted, 1.0):
                 switches.append(float(t))
         assert _max_switches_per_window(switches, 30.0) <= 1
-        if dwell == 10.0:
+        if dwell == 10.0 and clear is None:
             assert switches == []                  # never wanted for 10 s in a row
         else:
             assert len(switches) >= 10             # the budget, not the signal, limits it
+
+
+def test_a_clearly_better_placement_is_acted_on_within_a_second_a_marginal_one_after_the_dwell():
+    settings = ReDecisionSettings(0.8, 10.0, 1, 30.0, clear_margin=1.0, clear_dwell=0.5)
+    r = ReDecider(settings, ONLOAD)                 # profiles at 2 Hz
+    times = [10.0 + 0.5 * i for i in range(4)]
+    out = [r.update(t, OFFLOAD, 1.0) for t in times]
+    assert out == [None, OFFLOAD, None, None] and r.placement == OFFLOAD    # 0.5 s after the first clear want
+    assert r.waited == pytest.approx(0.5)
+    r = ReDecider(settings, ONLOAD)
+    # 4 of 5 votes: the long dwell; a unanimous update in between does not carry over once votes drop again
+    out = {t: r.update(t, OFFLOAD, 1.0 if t == 12.0 else 0.8) for t in [10.0 + 0.5 * i for i in range(25)]}
+    assert [t for t, v in out.items() if v] == [20.0] and r.waited == pytest.approx(10.0)
+    r = ReDecider(settings, OFFLOAD)
+    assert r.update(0.0, ONLOAD, 1.0) is None and r.update(0.4, OFFLOAD, 1.0) is None     # a dissent resets
+    assert r.update(0.6, ONLOAD, 1.0) is None and r.update(1.1, ONLOAD, 1.0) == ONLOAD
 
 
 def test_a_clear_change_is_acted_on_after_dwell():
@@ -517,6 +533,8 @@ def test_the_shipped_config_loads():
     (('evaluation', 'v_r'), -1, 'evaluation.v_r'),
     (('redecision', 'margin'), 0.5, 'redecision.margin'),
     (('redecision', 'max_migrations'), -1, 'redecision.max_migrations'),
+    (('redecision', 'clear', 'margin'), 0.7, 'redecision.clear.margin'),
+    (('redecision', 'clear', 'dwell'), None, 'redecision.clear.dwell'),
     (('tasks', 'patrol', 'modules'), [], 'tasks.patrol.modules'),
     (('locations',), ['corridor', 'corridor'], 'locations'),
     (('cloud_host',), 'robot', 'cloud_host'),

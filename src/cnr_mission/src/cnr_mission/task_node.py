@@ -76,6 +76,8 @@ class TaskRunner:
     def _on_decision(self, msg: TaskDecision) -> None:
         if msg.event == 'redecided':
             self.redecisions.append(msg)
+            self.say(f're-decided during the task: {msg.decision} at RTT {1000 * msg.c_l:.0f} ms, R_bw '
+                     f'{msg.r_bw:.3g} ({msg.message})')
 
     @staticmethod
     def say(text: str) -> None:

@@ -62,8 +62,9 @@ class DeciderNode:
         r = self.cfg.redecision
         rospy.loginfo(f'migration_decider: k = {self.cfg.decision.k}, V_r = {self.cfg.v_r:g}, tasks '
                       f'{", ".join(t + " (" + "/".join(m) + ")" for t, m in self.cfg.tasks.items())}; training sets in '
-                      f'{self.cfg.training_dir}; re-decision: margin {r.margin:g}, dwell {r.dwell:g} s, at most '
-                      f'{r.max_migrations} migration(s) per {r.window:g} s')
+                      f'{self.cfg.training_dir}; re-decision: margin {r.margin:g}, dwell {r.dwell:g} s'
+                      + (f' (clearly better: {r.clear_margin:g}, {r.clear_dwell:g} s)' if r.clear_margin is not None
+                         else '') + f', at most {r.max_migrations} migration(s) per {r.window:g} s')
 
     # ---------------------------------------------------------------- inputs
     def _on_placement(self, msg: Placement) -> None:
@@ -83,18 +84,20 @@ class DeciderNode:
         placement, d = switch
         hosts = self.advisor.hosts(running.task, placement)
         rospy.loginfo(f'migration_decider: re-decision during {running.task}@{running.location}: {placement} '
-                      f'(RTT {1000 * msg.rtt:.0f} ms, R_bw {msg.r_bw:.3g}, votes {d.votes or "rule"})')
-        threading.Thread(target=self._redecide, args=(running.task, running.location, placement, d, msg, hosts),
-                         daemon=True).start()
+                      f'(RTT {1000 * msg.rtt:.0f} ms, R_bw {msg.r_bw:.3g}, votes {d.votes or "rule"}; wanted for '
+                      f'{running.redecider.waited:.1f} s)')
+        threading.Thread(target=self._redecide, args=(running.task, running.location, placement, d, msg, hosts,
+                                                      running.redecider.waited), daemon=True).start()
 
     def _redecide(self, task: str, location: str, placement: str, d: Decision, msg: NetworkProfile,
-                  hosts: Dict[str, str]) -> None:
+                  hosts: Dict[str, str], waited: float) -> None:
         try:
             t0 = time.monotonic()
             placed, moved, message = self.place(hosts)
             out = self._message('redecided', task, location, placement, d, profile_of(msg), hosts)
             out.reason, out.placed, out.placing_time, out.migrations, out.message = \
-                REDECISION, placed, time.monotonic() - t0, moved, message
+                REDECISION, placed, time.monotonic() - t0, moved, f'wanted for {waited:.1f} s; {message}'
+
             self.pub.publish(out)
         finally:
             with self.lock:

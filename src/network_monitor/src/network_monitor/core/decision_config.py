@@ -103,9 +103,16 @@ def decision_config(s: Section) -> DecisionConfig:
     margin = r.number('margin', maximum=1.0)
     if not margin > 0.5:
         raise r.error('margin', f'must be > 0.5 (a majority for the other placement), got {margin:g}')
+    clear = r.section('clear')
+    clear_margin = clear.raw('margin')
+    if clear_margin is not None:
+        clear_margin = clear.number('margin', maximum=1.0)
+        if clear_margin < margin:
+            raise clear.error('margin', f'must be >= redecision.margin ({margin:g}), got {clear_margin:g}')
     redecision = ReDecisionSettings(margin=margin, dwell=r.number('dwell', nonnegative=True),
                                     max_migrations=r.integer('max_migrations', minimum=0),
-                                    window=r.number('window', positive=True))
+                                    window=r.number('window', positive=True), clear_margin=clear_margin,
+                                    clear_dwell=clear.number('dwell', nonnegative=True))
 
     robot_host, cloud_host = _name(s, 'robot_host'), _name(s, 'cloud_host')
     if robot_host == cloud_host:

@@ -6,7 +6,10 @@ decisions made during the task (each a wanted placement and a confidence, e.g. t
 switches only when
 
 * the other placement has been wanted, with confidence >= ``margin``, in every update for at least ``dwell``
-  seconds (any update wanting the current placement, or with less confidence, restarts the wait), and
+  seconds (any update wanting the current placement, or with less confidence, restarts the wait) — or it is
+  *clearly* better: wanted with confidence >= ``clear_margin`` (e.g. 1.0: all k neighbours) in every update for
+  ``clear_dwell`` seconds (e.g. 0.5 s: two profiles at 2 Hz), so a link that collapses is acted on within a
+  second while a marginal change waits out the long dwell, and
 * the migration budget allows it: at most ``max_migrations`` migrations in any ``window`` seconds (migrations
   made elsewhere, e.g. the one before the task, are counted through :meth:`ReDecider.migrated`).
 
@@ -29,6 +32,8 @@ class ReDecisionSettings:
     dwell: float            # s (>= 0) it must be wanted before a switch
     max_migrations: int     # >= 0 migrations per window (0: never switch mid-task)
     window: float           # s (> 0)
+    clear_margin: Optional[float] = None    # margin <= clear_margin <= 1: a clearly better placement (None: no
+    clear_dwell: float = 0.0                # such tier) switches after clear_dwell s (>= 0) instead of dwell
 
 
 class ReDecider:
@@ -45,6 +50,8 @@ class ReDecider:
         self.settings = settings
         self.placement = placement
         self.wanted_since: Optional[float] = None   # when the other placement began to be wanted
+        self.clear_since: Optional[float] = None    # ... with at least clear_margin
+        self.waited = 0.0                           # s the last switch was wanted for (the dwell it met)
         self._migrations: Deque[float] = deque()
         self._last: Optional[float] = None
 
@@ -74,14 +81,23 @@ class ReDecider:
         if wanted not in DECISIONS:
             raise ValueError(f'unknown placement {wanted!r}')
         self._clock(now)
-        if wanted == self.placement or confidence < self.settings.margin:
-            self.wanted_since = None
+        s = self.settings
+        if wanted == self.placement or confidence < s.margin:
+            self.wanted_since = self.clear_since = None
             return None
         if self.wanted_since is None:
             self.wanted_since = now
-        if now - self.wanted_since < self.settings.dwell or self.budget(now) <= 0:
+        if s.clear_margin is not None and confidence >= s.clear_margin:
+            self.clear_since = now if self.clear_since is None else self.clear_since
+        else:
+            self.clear_since = None
+        due = now - self.wanted_since >= s.dwell or \
+            (self.clear_since is not None and now - self.clear_since >= s.clear_dwell)
+        if not due or self.budget(now) <= 0:
             return None
+        self.waited = now - (self.wanted_since if self.clear_since is None or now - self.wanted_since >= s.dwell
+                             else self.clear_since)
         self.placement = wanted
-        self.wanted_since = None
+        self.wanted_since = self.clear_since = None
         self._migrations.append(now)
         return wanted
