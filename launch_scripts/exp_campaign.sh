@@ -6,7 +6,7 @@
 # Then the analysis: the decisions against the oracle of the paired runs, the learning curve beside the best
 # static threshold, and Figures 5-1 to 5-6 beside the thesis's numbers (bench_results/campaign/campaign.md). Needs the control values
 # (exp_control.sh) and root; uses the default testbed. Rows are appended as measured; run it again to resume.
-# About 65 s per condition (68 conditions in 1.24 h, 2026-11-26). --slowdown S: the robot's CPU capped at 1/S
+# About 66 s per condition (100 conditions in 1.83 h, 2026-11-26). --slowdown S: the robot's CPU capped at 1/S
 # instead of config/testbed.yaml's (a copy of config/ in <out>/slowdown_<S>), with the control values of
 # exp_control.sh --slowdown S (config/control_values_slowdown<S>.yaml).
 #
