@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import random
+import statistics
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Tuple
 
@@ -115,9 +116,8 @@ def spread(rows: Sequence[Dict[str, str]], placement: str, key: str) -> Spread:
     mine = [r for r in rows if r.get('force') == placement]
     v = [_f(r, key) for r in mine if r.get('mission_status') == COMPLETED]
     v = [x for x in v if math.isfinite(x)]
-    mean = sum(v) / len(v) if v else math.nan
-    sd = math.sqrt(sum((x - mean) ** 2 for x in v) / (len(v) - 1)) if len(v) > 1 else math.nan
-    return Spread(len(v), len(mine), mean, sd)
+    return Spread(len(v), len(mine), statistics.mean(v) if v else math.nan,
+                  statistics.stdev(v) if len(v) > 1 else math.nan)
 
 
 # ---------------------------------------------------------------- results

@@ -91,12 +91,11 @@ class ReDecider:
             self.clear_since = now if self.clear_since is None else self.clear_since
         else:
             self.clear_since = None
-        due = now - self.wanted_since >= s.dwell or \
-            (self.clear_since is not None and now - self.clear_since >= s.clear_dwell)
-        if not due or self.budget(now) <= 0:
+        by_dwell = now - self.wanted_since >= s.dwell
+        by_clear = self.clear_since is not None and now - self.clear_since >= s.clear_dwell
+        if not (by_dwell or by_clear) or self.budget(now) <= 0:
             return None
-        self.waited = now - (self.wanted_since if self.clear_since is None or now - self.wanted_since >= s.dwell
-                             else self.clear_since)
+        self.waited = now - (self.wanted_since if by_dwell else self.clear_since)
         self.placement = wanted
         self.wanted_since = self.clear_since = None
         self._migrations.append(now)
