@@ -85,7 +85,7 @@ def run_session(args: argparse.Namespace, plan: Dict, results: str, training_dir
     argv += ['--task-plan', plan_path, '--task-results', results, '--training-dir', training_dir,
              '--control-values', control_values]
     report.progress(f'[campaign] {len(plan["runs"])} runs of {plan["task"]}@{plan["location"]}; rows in {results}')
-    return subprocess.call(argv)
+    return report.call(argv)
 
 
 # ---------------------------------------------------------------- control (Table 4-5)
@@ -175,7 +175,7 @@ def control_missions(args: argparse.Namespace, scenario: str) -> int:
             argv = two_host_argv(args.location, run, args.port, getattr(args, 'cfg_dir', None))
             if argv is None:
                 return 2
-            rc = subprocess.call(argv + ['--migration'] + (['--link-map', link_map] if link_map else []))
+            rc = report.call(argv + ['--migration'] + (['--link-map', link_map] if link_map else []))
             if rc not in (0, 3) or not os.path.exists(summary):
                 print(f'exp_control: run {i} ended with status {rc} and no report ({run}); run the same command '
                       f'again to resume', file=sys.stderr)
@@ -358,4 +358,5 @@ def main(argv: Optional[List[str]] = None) -> int:
 
 
 if __name__ == '__main__':
+    report.stop_on_signals()
     sys.exit(main())

@@ -142,6 +142,15 @@ class Bench:
             read_probe(self.probe_file, tail_bytes=65536), module, time.time(), FLOWING_WITHIN[module]), 90)
 
     def warm_standby(self, module: str, host: str) -> bool:
+        """A standby of the module on the host, warm: the module's dormant instance there woken (config/migration.yaml
+        ``dormant``: a retired move_base sleeps on the robot), else one started by the host's agent."""
+        if self.role(module, host) == 'dormant':
+            res = self.ns('robot', 'rosservice', 'call', f'/migration/{module}/{host}/control', '{command: wake}',
+                          timeout=30)
+            if res.returncode != 0 or 'ok: True' not in res.stdout:
+                report.progress(f'  (waking the dormant {module} on {host} failed: '
+                                f'{(res.stdout + res.stderr).strip()[-200:]})')
+            return self.wait(f'a warm {module} standby on {host}', lambda: self.role(module, host) == 'standby', 120)
         res = self.ns('robot', 'rosservice', 'call', f'/migration/agents/{host}/command', 'start', module, timeout=30)
         if res.returncode != 0 or 'ok: True' not in res.stdout:
             report.progress(f'  (the {host} agent did not start a {module} standby: {(res.stdout + res.stderr).strip()[-200:]})')
@@ -327,4 +336,5 @@ def main(argv: Optional[List[str]] = None) -> int:
 
 
 if __name__ == '__main__':
+    report.stop_on_signals()
     sys.exit(main())

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
+import subprocess
 import sys
 import tempfile
 from typing import Dict, Iterable, List, Sequence
@@ -58,6 +60,32 @@ def write_text(path: str, text: str) -> None:
     with open(tmp, 'w') as f:
         f.write(text)
     os.replace(tmp, path)
+
+
+def stop_on_signals() -> None:
+    """SIGTERM, and SIGINT even where the shell that started a background job ignored it, raise
+    KeyboardInterrupt: a long run writes what it measured and stops its testbed (for a command's ``__main__``)."""
+    def _interrupt(*_) -> None:
+        raise KeyboardInterrupt
+    signal.signal(signal.SIGTERM, _interrupt)
+    signal.signal(signal.SIGINT, _interrupt)
+
+
+def call(argv: Sequence[str]) -> int:
+    """subprocess.call, except that an interrupt stops the child with SIGTERM and waits for its clean-up
+    (subprocess.call sends SIGKILL, which leaves a testbed's namespaces and processes behind)."""
+    child = subprocess.Popen(list(argv))
+    try:
+        return child.wait()
+    except KeyboardInterrupt:
+        child.terminate()
+        while True:
+            try:
+                child.wait()
+                break
+            except KeyboardInterrupt:   # a second interrupt: the child is already stopping
+                continue
+        raise
 
 
 def progress(msg: str) -> None:
