@@ -15,6 +15,7 @@
 #   launch_scripts/bench_migration.sh [--runs 10] [--rtts 0,50,100] [--modules a,b] [--modes cold,hot]
 #                                     [--cutoff-trials 3] [--settle 3] [--out DIR] [--port 11411]
 #                                     [--config-dir DIR]   (default config/; e.g. a copy with robot_cpu off)
+#                                     [--slowdown S]       (the robot capped at 1/S CPU, on a copy in --out)
 set -euo pipefail
 source "$(dirname "${BASH_SOURCE[0]}")/common.sh"
 case "${1:-}" in -h|--help) cnr_help; exit 0 ;; esac

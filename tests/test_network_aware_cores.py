@@ -331,6 +331,12 @@ def test_a_slowdown_has_its_own_results_control_values_and_config_copy(tmp_path)
     cfg = script.slowdown_config(str(tmp_path), 6.5)
     assert load_testbed(os.path.join(cfg, 'testbed.yaml')).robot_cpu.cpus == pytest.approx(1 / 6.5)
     assert os.path.exists(os.path.join(cfg, 'migration.yaml'))
+    other = script.slowdown_config(str(tmp_path / 'b'), 2.0, cfg)          # from another copy (bench_migration)
+    assert load_testbed(os.path.join(other, 'testbed.yaml')).robot_cpu.cpus == pytest.approx(0.5)
+    assert script.slowdown_config(str(tmp_path), 6.5, cfg) == cfg          # a copy given as its own source: kept
+    assert os.path.exists(os.path.join(cfg, 'migration.yaml'))
+    from cnr_benchmarks import migration_bench
+    assert migration_bench.main(['--slowdown', '0.5', '--out', str(tmp_path / 'm')]) == 2
     with pytest.raises(SystemExit):
         script.parse_args(['campaign', '--slowdown', '0.5'])
     with pytest.raises(SystemExit):

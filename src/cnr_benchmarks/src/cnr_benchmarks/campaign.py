@@ -202,14 +202,16 @@ def slowdown_dir(out: str, slowdown: float) -> str:
     return os.path.join(out, f'slowdown_{slowdown:g}')
 
 
-def slowdown_config(out: str, slowdown: float) -> str:
-    """A copy of the workspace's config/ whose testbed.yaml caps the robot at 1/``slowdown`` CPU (the thesis's
-    "different local CPU frequency"); rewritten on every run so it follows the workspace's configuration."""
+def slowdown_config(out: str, slowdown: float, src: Optional[str] = None) -> str:
+    """A copy of ``src`` (default the workspace's config/) whose testbed.yaml caps the robot at 1/``slowdown`` CPU
+    (the thesis's "different local CPU frequency"); rewritten on every run so it follows the configuration."""
     import shutil
     dst = os.path.join(slowdown_dir(out, slowdown), 'config')
-    if os.path.exists(dst):
-        shutil.rmtree(dst)
-    shutil.copytree(os.path.join(report.WS, 'config'), dst)
+    src = os.path.abspath(src or os.path.join(report.WS, 'config'))
+    if src != os.path.abspath(dst):          # (a copy made before is only updated)
+        if os.path.exists(dst):
+            shutil.rmtree(dst)
+        shutil.copytree(src, dst)
     path = os.path.join(dst, 'testbed.yaml')
     with open(path) as f:
         doc = yaml.safe_load(f)

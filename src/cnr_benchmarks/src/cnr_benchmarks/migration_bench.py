@@ -291,6 +291,8 @@ def main(argv: Optional[List[str]] = None) -> int:
     ap.add_argument('--port', type=int, default=11411)
     ap.add_argument('--config-dir', default=os.path.join(report.WS, 'config'),
                     help='the configuration (e.g. a copy whose testbed.yaml turns the robot CPU cap off)')
+    ap.add_argument('--slowdown', type=float, default=None,
+                    help='cap the robot at 1/S CPU on a copy of --config-dir in --out (as exp_campaign.sh --slowdown)')
     args = ap.parse_args(argv)
     args.argv = list(argv if argv is not None else sys.argv[1:])
     args.modules = [m for m in args.modules.split(',') if m]
@@ -300,6 +302,15 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f'bench_migration: unknown mode or module: {", ".join(bad)}', file=sys.stderr)
         return 2
     rtts = report.parse_rtts('bench_migration', args.rtts)
+    if args.slowdown is not None:
+        from cnr_benchmarks.campaign import slowdown_config, testbed_running
+        if args.slowdown < 1.0:
+            print(f'bench_migration: --slowdown must be >= 1 (the robot gets 1/S CPU), got {args.slowdown:g}',
+                  file=sys.stderr)
+            return 2
+        if testbed_running('bench_migration'):
+            return 2
+        args.config_dir = slowdown_config(args.out, args.slowdown, args.config_dir)
     started = datetime.datetime.now().strftime('%Y-%m-%d %H:%M')
     bench = Bench(args)
     results = report.TsvLog(os.path.join(bench.out, 'results.tsv'), COLUMNS)
