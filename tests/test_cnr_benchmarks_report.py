@@ -34,28 +34,27 @@ def _background_job(argv):
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
 
 
-def test_sigint_to_a_background_run_stops_it_and_its_child_cleans_up(tmp_path):
+def _interrupted(tmp_path, sig):
+    """A background run whose child is running, sent ``sig``: (exit status, output, the child's clean-up file)."""
     ready, cleaned = tmp_path / 'ready', tmp_path / 'cleaned'
     parent = _background_job([sys.executable, '-c', PARENT, CHILD, str(ready), str(cleaned)])
     try:
         wait_until(ready.exists, 20, 'the child to start')
-        parent.send_signal(signal.SIGINT)
+        parent.send_signal(sig)
         out, _ = parent.communicate(timeout=20)
     finally:
         parent.kill()
-    assert parent.returncode == 3 and 'interrupted' in out
+    return parent.returncode, out, cleaned
+
+
+def test_sigint_to_a_background_run_stops_it_and_its_child_cleans_up(tmp_path):
+    status, out, cleaned = _interrupted(tmp_path, signal.SIGINT)
+    assert status == 3 and 'interrupted' in out
     assert cleaned.read_text() == 'cleaned up'
 
 
 def test_sigterm_stops_it_too_and_call_returns_the_exit_code(tmp_path):
-    ready, cleaned = tmp_path / 'ready', tmp_path / 'cleaned'
-    parent = _background_job([sys.executable, '-c', PARENT, CHILD, str(ready), str(cleaned)])
-    try:
-        wait_until(ready.exists, 20, 'the child to start')
-        parent.send_signal(signal.SIGTERM)
-        parent.communicate(timeout=20)
-    finally:
-        parent.kill()
-    assert parent.returncode == 3 and cleaned.exists()
+    status, out, cleaned = _interrupted(tmp_path, signal.SIGTERM)
+    assert status == 3 and cleaned.exists()
     from cnr_benchmarks import report
     assert report.call([sys.executable, '-c', 'import sys; sys.exit(7)']) == 7
