@@ -257,6 +257,9 @@ def test_static_rule_fit_and_learning_curve():
     curve = campaign.learning_curve(rows, 20, held, truth, SETTINGS)
     assert [c['rows'] for c in curve] == [5, 10, 15, 20]
     assert curve[-1]['knn'] >= 0.9 and curve[-1]['static'] >= 0.9
+    # the majority placement alone bounds how far any rule can be above never offloading (a static rule)
+    assert campaign.constant_accuracy(ONLOAD, truth) == pytest.approx(0.6)
+    assert campaign.constant_accuracy(OFFLOAD, truth + [campaign.EITHER]) == pytest.approx(9 / 21)
 
 
 def test_fits_and_crossings():

@@ -257,6 +257,9 @@ def write_analysis(args: argparse.Namespace) -> int:
     def pct(k: int, n: int) -> str:
         return f'{k}/{n} ({_fmt(100 * k / max(n, 1), 0)} %)'
 
+    def const(labels: Sequence[str]) -> str:
+        return ' / '.join(f'{_fmt(100 * core.constant_accuracy(d, labels), 0)} %' for d in (ONLOAD, OFFLOAD))
+
     def acc(c: Optional[Dict], key: str) -> str:
         return f'{_fmt(100 * c[key], 0)} %' if c else '–'
     lines = [
@@ -284,6 +287,9 @@ def write_analysis(args: argparse.Namespace) -> int:
         f'| best static threshold, same rows (RTT < {_fmt(1000 * last["rule_rtt"], 0) if last else "–"} ms, '
         f'R_bw > {_fmt(last["rule_r_bw"], 2) if last else "–"}) | MALMOS: k-NN +10.9–40.5 points | '
         f'{acc(last, "static")} | {acc(last, "static_noise")} |',
+        f'| the majority placement alone on the held-out conditions (never offload / always offload): a learned '
+        f'rule can be at most 100 % minus the larger above a static rule | goal: +11 points needs < 89 % | '
+        f'{const(oracle[n_train:])} | {const(oracle_noise[n_train:])} |',
         f'| paired labels (one row per training pair, labelled by its oracle: `learning_curve_paired.tsv`): k-NN, '
         f'all {last_p["rows"] if last_p else 0} rows | – | {acc(last_p, "knn")} | {acc(last_p, "knn_noise")} |',
         f'| same, ≤ 40 rows ({at40_p["rows"] if at40_p else 0} rows) | goal ≥ 90 % | {acc(at40_p, "knn")} | '
