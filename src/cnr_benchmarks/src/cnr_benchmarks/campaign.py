@@ -348,10 +348,11 @@ def main(argv: Optional[List[str]] = None) -> int:
     if args.cmd == 'local_remote' and args.analyse_only:
         from cnr_benchmarks.campaign_figures import write_local_remote
         return write_local_remote(args)
-    if args.cmd != 'analyse' and os.geteuid() != 0:
+    runs_nothing = args.cmd == 'analyse' or (args.cmd == 'control' and getattr(args, 'from_rows', None))
+    if not runs_nothing and os.geteuid() != 0:
         print('campaign: needs root (the testbed\'s network namespaces and TUN devices)', file=sys.stderr)
         return 2
-    if args.cmd in ('control', 'campaign') and args.slowdown is not None:
+    if args.cmd in ('control', 'campaign') and args.slowdown is not None and not runs_nothing:
         if testbed_running(f'exp_{args.cmd}'):
             return 2
         args.cfg_dir = slowdown_config(args.out, args.slowdown)
