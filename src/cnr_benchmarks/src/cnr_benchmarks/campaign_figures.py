@@ -374,6 +374,10 @@ def write_local_remote(args: argparse.Namespace) -> int:
             ax.bar(x + (j - 0.5) * 0.38, [bar[key][p].mean for bar in bars], 0.38,
                    yerr=[bar[key][p].sd if math.isfinite(bar[key][p].sd) else 0.0 for bar in bars],
                    capsize=4, label=label)
+            for i, bar in enumerate(bars):          # no completed run: say so where its bar would be
+                if not math.isfinite(bar[key][p].mean):
+                    ax.text(x[i] + (j - 0.5) * 0.38, 0.0, f' {p}: {bar[key][p].n} of {bar[key][p].runs} completed',
+                            rotation=90, ha='center', va='bottom', fontsize=8)
         ax.set_xticks(x)
         ax.set_xticklabels([f'slowdown {bar[0]:g}\n({1 / bar[0]:.3g} CPU)' for bar in bars])
         ax.set_ylabel(unit)
