@@ -367,3 +367,13 @@ def test_control_values_from_the_all_local_rows_of_a_results_file(tmp_path):
     args = script.parse_args(['control', '--from-rows', str(tmp_path / 'nope.tsv'), '--out', str(tmp_path / 'o2'),
                               '--control-values', str(tmp_path / 'cv2.yaml')])
     assert script.control(args) == 2 and not (tmp_path / 'cv2.yaml').exists()
+
+
+def test_an_analysis_names_the_command_that_made_the_rows(tmp_path):
+    """--analyse-only reports the campaign's own command (its command.txt), and itself beside it."""
+    import argparse
+    from cnr_benchmarks.campaign_figures import _command
+    args = argparse.Namespace(out=str(tmp_path), argv=['--analyse-only', '--out', str(tmp_path)])
+    assert _command(args) == f'`launch_scripts/exp_campaign.sh --analyse-only --out {tmp_path}`'
+    (tmp_path / 'command.txt').write_text('launch_scripts/exp_campaign.sh --conditions 7 --seed 3\n')
+    assert _command(args).startswith('`launch_scripts/exp_campaign.sh --conditions 7 --seed 3` (analysed by ')

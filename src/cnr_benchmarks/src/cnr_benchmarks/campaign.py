@@ -258,6 +258,8 @@ def campaign(args: argparse.Namespace) -> int:
     plan = core.plan_document(args.task, args.location, args.settle, conditions)
     plan['seed'] = args.seed
     results = os.path.join(args.out, 'results.tsv')
+    os.makedirs(args.out, exist_ok=True)         # the command that made the rows, for a later --analyse-only
+    report.write_text(os.path.join(args.out, 'command.txt'), 'launch_scripts/exp_campaign.sh ' + ' '.join(args.argv))
     t0 = time.monotonic()
     rc = run_session(args, plan, results, os.path.join(args.out, 'training'), args.control_values)
     report.progress(f'[campaign] session ended with status {rc} after {(time.monotonic() - t0) / 60:.1f} min')

@@ -31,6 +31,15 @@ def _fmt(x: float, digits: int = 1) -> str:
     return '–' if not math.isfinite(x) else f'{x:.{digits}f}'
 
 
+def _command(args: argparse.Namespace) -> str:
+    """The command that made the rows (``<out>/command.txt``, written by the campaign) and, if it differs, the one
+    that analysed them."""
+    this = f'launch_scripts/exp_campaign.sh {" ".join(args.argv)}'
+    path = os.path.join(args.out, 'command.txt')
+    made = open(path).read().strip() if os.path.exists(path) else this
+    return f'`{made}`' + ('' if made == this else f' (analysed by `{this}`)')
+
+
 def write_analysis(args: argparse.Namespace) -> int:
     from cnr_mission.core.task import COMPLETED, read_results
     from cnr_params import ConfigError
@@ -264,7 +273,7 @@ def write_analysis(args: argparse.Namespace) -> int:
         return f'{_fmt(100 * c[key], 0)} %' if c else '–'
     lines = [
         f'# Continuous experiment (thesis §5)\n',
-        f'`launch_scripts/exp_campaign.sh {" ".join(args.argv)}`: {len(rows)} runs, {len(pairs)} paired conditions '
+        f'{_command(args)}: {len(rows)} runs, {len(pairs)} paired conditions '
         f'({n_train} training, {n_test} held out), {wall / 3600:.2f} h of runs; control values: CT '
         f'{control.ct_mean:.2f} s, CB {control.cb_mean:.6f} ({control.runs} runs, {control.date}).'
         + (f' Left out (--exclude): {", ".join(excluded)}.' if excluded else '') + '\n',
