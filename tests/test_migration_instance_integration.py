@@ -100,3 +100,28 @@ def test_a_promotion_carrying_the_lease_of_a_standby_request_is_active_when_answ
     assert driver.last_promotion_active
     assert next_goal().success                             # its service was registered before it answered
     driver.wait_active(5)
+
+
+def test_an_instance_that_became_active_asks_the_bridge_to_poll_after_registering(gg, ros):
+    """``bridge_poll_service`` (config/migration.yaml): the test plays this host's bridge."""
+    from std_srvs.srv import Empty, EmptyResponse
+    proc, driver = gg
+    calls = []
+
+    def on_poll(_req):
+        # what the bridge's poll would find: the service on_active registered must already be there
+        try:
+            calls.append(bool(ros.master.call('lookupService', '/global_goal_manager/next_goal')))
+        except RuntimeError:
+            calls.append(False)
+        return EmptyResponse()
+    service = rospy.Service('/bridge/poll', Empty, on_poll)
+    try:
+        driver.wait_standby(30)
+        assert calls == []                                 # a standby asks nothing
+        driver.promote(None)
+        driver.wait_active(10)
+        wait_until(lambda: calls, 10, 'the promoted instance to ask the bridge to poll')
+        assert calls == [True]
+    finally:
+        service.shutdown()

@@ -186,3 +186,11 @@ def test_config_parses_and_rejects_bad_values(tmp_path):
         with pytest.raises(ConfigError) as err:
             config.parse(section(**kw))
         assert field in str(err.value) and str(err.value).startswith('/bridge: ')
+
+
+def test_filter_memo_answers_like_the_globs_and_forgets_beyond_its_limit():
+    f = sync.Filter(['/move_base/*', '/tf'], ['*/set_logger_level'])
+    f.MEMO_LIMIT = 3
+    names = ['/move_base/goal', '/tf', '/tf_static', '/move_base/set_logger_level', '/odom'] * 2
+    assert [f.passes(n) for n in names] == [True, True, False, False, False] * 2
+    assert len(f._memo) <= 3

@@ -97,6 +97,32 @@ def test_new_publisher_reaches_the_other_master_within_half_a_second(bridged):
     print(f'sync latency {1000 * latency:.0f} ms')
 
 
+def test_a_poll_request_sends_a_new_publisher_before_the_next_poll(hosts):
+    """``~poll``: with polls 20 s apart, a publisher reaches the other master once its host's bridge is asked."""
+    from cnr_testbed.rosside import start_bridge
+    tb, robot, cloud, secret = hosts
+    tb.set('both', delay=0.0, loss=0.0, outage=False)
+    slow = dict(SETTINGS, poll_rate=0.05)
+    procs = [start_bridge(robot, cloud, secret, **slow), start_bridge(cloud, robot, secret, **slow)]
+    try:
+        wait_until(lambda: 'peer cloud is up' in log(procs[0]) and 'peer robot is up' in log(procs[1]), 30,
+                   'the bridges to see each other')
+        cloud.run(['rostopic', 'pub', '-r', '10', '/chatter', 'std_msgs/String', 'data: x'], 'pub')
+        wait_until(lambda: publishers(cloud, '/chatter'), 20, 'the publisher on the cloud master')
+        assert not {n for n in publishers(robot, '/chatter') if n.startswith('/cloud/')}   # not polled yet
+        call = cloud.run(['rosservice', 'call', '/bridge/poll'], 'poll')
+        assert call.wait(30) == 0
+        wait_until(lambda: {n for n in publishers(robot, '/chatter') if n.startswith('/cloud/')}, 5,
+                   'the publisher on the robot master after the poll request')
+    finally:
+        for side, proc in ((robot, procs[0]), (cloud, procs[1])):
+            side.stop_proc(proc)
+        for side in (robot, cloud):
+            for proc in list(side.procs):
+                if proc is not side.master:
+                    side.stop_proc(proc)
+
+
 def test_rosservice_call_reaches_the_other_master(bridged):
     tb, robot, cloud, _ = bridged
     cloud.run(['rosrun', 'cnr_benchmarks', 'echo_monitor'], 'monitor')

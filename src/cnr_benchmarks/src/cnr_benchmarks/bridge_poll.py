@@ -4,8 +4,8 @@
 
 A master on a free port holds a graph like the robot's (``--nodes`` nodes, each publishing ``--topics-per-node``
 topics with a subscriber and one service); the bridge's :class:`multimaster_bridge.node.MasterClient` polls it
-at ``--rate`` Hz (a full refresh once a second, as the bridge does), once as it is (one kept-alive connection)
-and as it was before (:class:`AsBefore`), twice each in turn. Prints ms of CPU per poll and the CPU
+at ``--rate`` Hz (a full refresh once a second, as the bridge does), as it is and as it was before
+(:class:`AsBefore`, :class:`ParsedEachPoll`), twice each in turn. Prints ms of CPU per poll and the CPU
 share at the rate.
 """
 from __future__ import annotations
@@ -36,6 +36,16 @@ class AsBefore(MasterClient):
         multi.getTopicTypes(self.caller_id)
         (_c1, _, state), (c2, _, types) = tuple(multi())
         return sync.Snapshot.from_system_state(state, types if c2 == 1 else [])
+
+
+class ParsedEachPoll(MasterClient):
+    """The bridge's client as it was until 2026-11-26: kept-alive connection, but every answer gzip-compressed
+    by the master and parsed by the bridge, even when it is the same as the last one."""
+
+    def _proxy(self) -> xmlrpc.client.ServerProxy:
+        if self._server is None:
+            self._server = xmlrpc.client.ServerProxy(self.uri)
+        return self._server
 
 
 def fill(master: RosMaster, nodes: int, per_node: int) -> None:
@@ -73,8 +83,9 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f'master with {args.nodes} nodes, {args.nodes * args.topics_per_node} topics; {args.polls} polls at '
               f'{args.rate:g} Hz each', flush=True)
         for _ in range(2):
-            for label, make in (('as before (new connection per call, types every poll)', AsBefore),
-                                ('now (kept-alive connection, types when new)           ', MasterClient)):
+            for label, make in (('until 11-25 (new connection per call, types every poll)', AsBefore),
+                                ('until 11-26 (kept-alive connection, types when new)    ', ParsedEachPoll),
+                                ('now (no gzip, an unchanged answer is not parsed again) ', MasterClient)):
                 m, c = measure(proc, lambda: make(master.uri, '/bridge'), args.polls, args.rate)
                 print(f'{label}: CPU per poll: master {m:.2f} ms, bridge {c:.2f} ms; at {args.rate:g} Hz '
                       f'{(m + c) * args.rate / 1000.0:.3f} CPU', flush=True)

@@ -36,6 +36,7 @@ import rospy
 from cnr_msgs.msg import InstanceStatus, MigrationLease, MigrationRenew, ModuleState
 from cnr_msgs.srv import InstanceControl, InstanceControlResponse
 from cnr_params.ros import distinct_callerid, private_section
+from std_srvs.srv import Empty
 from migration_manager.core import state as state_codec
 from migration_manager.core.config import MigrationConfig, from_section
 from migration_manager.core.lease import Answer, Holder, instance_id
@@ -304,11 +305,27 @@ class ManagedInstance:
                 self.was_active = True
                 rospy.loginfo(f'{self.id}: active (term {self.holder.term})')
                 self.hooks.on_active()
+                self._nudge_bridge()
             elif not active and self.was_active:
                 self.was_active = False
                 if lapsed:
                     rospy.logwarn(f'{self.id}: lease lapsed (term {self.holder.term}): outputs closed until a '
                                   f'renewal is granted')
+
+    def _nudge_bridge(self) -> None:
+        """Ask this host's bridge to poll its master now (``bridge_poll_service``): what ``on_active`` registered
+        reaches the other host without waiting for the bridge's next poll. In a thread of its own and never
+        waited on; no bridge (a single-master run) is not an error."""
+        name = self.cfg.bridge_poll_service
+        if not name:
+            return
+
+        def call() -> None:
+            try:
+                rospy.ServiceProxy(name, Empty)()
+            except (rospy.ServiceException, rospy.ROSException, OSError) as exc:
+                rospy.logdebug(f'{self.id}: no bridge poll ({name}): {exc}')
+        threading.Thread(target=call, name='bridge-nudge', daemon=True).start()
 
     def _loop(self) -> None:
         cfg = self.cfg

@@ -5,6 +5,7 @@ ROS I/O only: the sync rules are in :mod:`multimaster_bridge.core.sync`, the wir
 """
 from __future__ import annotations
 
+import gzip
 import math
 import socket
 import threading
@@ -18,6 +19,7 @@ import rospy
 from cnr_msgs.msg import LinkQuality
 from cnr_params import exit_on_config_error
 from cnr_params.ros import init_node, private_section
+from std_srvs.srv import Empty, EmptyResponse
 from multimaster_bridge.core import config as bridge_config
 from multimaster_bridge.core import protocol, sync
 from multimaster_bridge.core.heartbeat import LinkEstimator
@@ -41,6 +43,42 @@ class PeerState:
         self.returned_at = -math.inf
 
 
+class _RememberingTransport(xmlrpc.client.Transport):
+    """Keeps the last raw answer to each of the ``remembered`` calls: an answer byte-for-byte like the last
+    one is not parsed again (:attr:`unchanged` says so). The master's graph is the same on almost every poll,
+    and parsing getSystemState's XML was most of the bridge's cost per poll."""
+
+    remembered = (b'<methodName>getSystemState</methodName>', b'<methodName>getTopicTypes</methodName>')
+    # the master is on this host: compressing its answers (xmlrpc does above 1400 B when asked) cost it CPU
+    accept_gzip_encoding = False
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.unchanged = False
+        self._key: Optional[bytes] = None
+        self._last: Dict[bytes, Tuple[bytes, tuple]] = {}
+
+    def request(self, host, handler, request_body, verbose=False):  # noqa: ANN001 - xmlrpc's signature
+        self._key = request_body if any(m in request_body for m in self.remembered) else None
+        return super().request(host, handler, request_body, verbose)
+
+    def parse_response(self, response):  # noqa: ANN001 - xmlrpc's signature
+        body = response.read()
+        if response.getheader('Content-Encoding', '') == 'gzip':
+            body = gzip.decompress(body)
+        last = self._last.get(self._key) if self._key is not None else None
+        self.unchanged = last is not None and last[0] == body
+        if self.unchanged:
+            return last[1]
+        parser, unmarshaller = self.getparser()
+        parser.feed(body)
+        parser.close()
+        result = unmarshaller.close()
+        if self._key is not None:
+            self._last[self._key] = (body, result)
+        return result
+
+
 class MasterClient:
     """Batched Master API calls (one HTTP request per batch) on behalf of the bridge, over one kept-alive
     connection (the master's XML-RPC server speaks HTTP/1.1): a poll is then one request on an open socket, not
@@ -51,10 +89,12 @@ class MasterClient:
         self.uri = uri
         self.caller_id = caller_id
         self._server: Optional[xmlrpc.client.ServerProxy] = None
+        self._transport = _RememberingTransport()
 
     def _proxy(self) -> xmlrpc.client.ServerProxy:
         if self._server is None:
-            self._server = xmlrpc.client.ServerProxy(self.uri)
+            self._transport = _RememberingTransport()
+            self._server = xmlrpc.client.ServerProxy(self.uri, transport=self._transport)
         return self._server
 
     def reset(self) -> None:
@@ -64,8 +104,11 @@ class MasterClient:
 
     def system_state(self, previous: Optional[sync.Snapshot], refresh: bool) -> sync.Snapshot:
         """getSystemState; the topic types only when a published topic is new to ``previous`` (or ``refresh``):
-        their answer is parsed for nothing on most polls (cnr_benchmarks.bridge_poll)."""
+        their answer is parsed for nothing on most polls (cnr_benchmarks.bridge_poll). ``previous`` itself
+        when the master's answer is the same as last time and no refresh is due."""
         _code, _, state = self._proxy().getSystemState(self.caller_id)
+        if previous is not None and not refresh and self._transport.unchanged:
+            return previous
         published = {t for t, nodes in state[0] if nodes}
         if previous is None or refresh or not published <= set(previous.types):
             code, _, types = self._proxy().getTopicTypes(self.caller_id)
@@ -76,6 +119,8 @@ class MasterClient:
 
     def snapshot(self, previous: Optional[sync.Snapshot], refresh_nodes: bool) -> sync.Snapshot:
         snap = self.system_state(previous, refresh_nodes)
+        if snap is previous:
+            return snap
         names = sorted(snap.node_names())
         services = sorted(snap.services)
         if (previous is not None and not refresh_nodes and set(names) <= set(previous.nodes)
@@ -146,6 +191,7 @@ class Bridge:
         self.md5s: Dict[str, str] = {}
         self.local_ages: Dict[str, float] = {}
         self.local_md5s: Dict[str, str] = {}
+        self.exported_owned: Optional[Set[str]] = None   # the proxies excluded from the last export
         self.reported: Set[str] = set()
         self.last_node_refresh = -math.inf
         self.master_ok = True
@@ -156,6 +202,15 @@ class Bridge:
         # thread (reconcile() in the loop, then shutdown()), so they need no lock of their own.
         self.closing = False
         self.quality_pub = rospy.Publisher('link_quality', LinkQuality, queue_size=10)
+        self.poll_requested = False
+        rospy.Service('~poll', Empty, self._on_poll_request)
+
+    def _on_poll_request(self, _req) -> EmptyResponse:
+        """``~poll``: a node that just registered something has it reach the peers without waiting for the
+        next poll (migration_manager's instances call it when they become active)."""
+        self.poll_requested = True
+        self.wake.set()
+        return EmptyResponse()
 
     # ---------------------------------------------------------------- wire
     def _send(self, peer: PeerState, kind: str, **body) -> None:
@@ -254,7 +309,8 @@ class Bridge:
 
     def poll(self, now: float) -> None:
         refresh = now - self.last_node_refresh > 1.0
-        snap = self.master.snapshot(self.snapshot, refresh)
+        previous = self.snapshot
+        snap = self.master.snapshot(previous, refresh)
         if refresh:
             self.last_node_refresh = now
         self.snapshot = snap
@@ -266,6 +322,14 @@ class Bridge:
             seen[key] = self.service_first_seen.get(key, now)
             ages[s] = now - seen[key]
         self.service_first_seen = seen
+        if snap is previous and owned == self.exported_owned:
+            # the master's graph as last time: the exported state too, but for the services' ages
+            with self.lock:
+                self.export = dict(self.export, srvs={s: [v[0], v[1], round(ages.get(s, 0.0), 3)]
+                                                      for s, v in self.export.get('srvs', {}).items()})
+            self.local_ages = ages
+            return
+        self.exported_owned = owned
         md5s = {t: m for t in set(snap.types.values()) for m in [self._md5(t)] if m}
         export = sync.export_state(snap, owned, self.cfg.topics, self.cfg.services, ages, md5s)
         dig = sync.digest(export)
@@ -403,7 +467,8 @@ class Bridge:
             try:
                 if now >= next_poll or self.wake.is_set():
                     self.wake.clear()
-                    if now >= next_poll:
+                    if now >= next_poll or self.poll_requested:
+                        self.poll_requested = False
                         next_poll = max(next_poll + period, now)
                         self.poll(now)
                     with self.lock:

@@ -41,6 +41,8 @@ class MigrationConfig:
     restart_delay: float
     log_dir: str
     control_nice: int            # nice value of the manager and of the instances' protocol threads (core.priority)
+    bridge_poll_service: str     # this host's bridge's "poll now" service, called by an instance that became
+                                 # active (its new registrations reach the other host at once); '' = none
 
     def other(self, host: str) -> str:
         return next(h for h in self.hosts if h != host)
@@ -103,4 +105,12 @@ def from_section(s: Section) -> MigrationConfig:
         stop_timeout=agent.number('stop_timeout', positive=True),
         restart_delay=agent.number('restart_delay', minimum=0.0),
         log_dir=os.path.abspath(os.path.expanduser(log_dir)),
-        control_nice=s.integer('control_nice', minimum=-20, maximum=19))
+        control_nice=s.integer('control_nice', minimum=-20, maximum=19),
+        bridge_poll_service=_service_name(s, 'bridge_poll_service'))
+
+
+def _service_name(s: Section, key: str) -> str:
+    name = s.string(key)
+    if name and not name.startswith('/'):
+        raise s.error(key, f"must be a global name (/...) or '' (none), got {name!r}")
+    return name

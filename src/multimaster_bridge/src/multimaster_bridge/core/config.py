@@ -95,7 +95,7 @@ def parse(section: Section) -> BridgeConfig:
         services=Filter(_globs(section, 'allow_services'), _globs(section, 'deny_services')),
         heartbeat_rate=section.number('heartbeat_rate', minimum=1.0, maximum=50.0),
         loss_timeout=section.number('loss_timeout', positive=True),
-        poll_rate=section.number('poll_rate', minimum=1.0, maximum=100.0),
+        poll_rate=section.number('poll_rate', minimum=0.05, maximum=100.0),
         quality_rate=section.number('quality_rate', positive=True))
     if cfg.loss_timeout < 3.0 / cfg.heartbeat_rate:
         raise section.error('loss_timeout', f'must cover at least 3 heartbeats ({3.0 / cfg.heartbeat_rate:.2f} s)')

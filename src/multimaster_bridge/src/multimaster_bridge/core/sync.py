@@ -32,13 +32,23 @@ from typing import Dict, Iterable, List, NamedTuple, Optional, Set, Tuple
 class Filter:
     """Allow/deny globs for one kind of name (fnmatch syntax, ``*`` also matches ``/``)."""
 
+    MEMO_LIMIT = 4096   # names remembered; the memo starts afresh beyond (a graph that churns names)
+
     def __init__(self, allow: Iterable[str] = (), deny: Iterable[str] = ()) -> None:
         self.allow = list(allow)
         self.deny = list(deny)
+        self._memo: Dict[str, bool] = {}
 
     def passes(self, name: str) -> bool:
-        return (any(fnmatch.fnmatchcase(name, g) for g in self.allow)
-                and not any(fnmatch.fnmatchcase(name, g) for g in self.deny))
+        """Memoised: the bridge asks about every name of its master at every poll, and a name's answer
+        never changes (matching ~25 globs per name was a third of a poll's CPU)."""
+        verdict = self._memo.get(name)
+        if verdict is None:
+            if len(self._memo) >= self.MEMO_LIMIT:
+                self._memo.clear()
+            verdict = self._memo[name] = (any(fnmatch.fnmatchcase(name, g) for g in self.allow)
+                                          and not any(fnmatch.fnmatchcase(name, g) for g in self.deny))
+        return verdict
 
 
 @dataclass

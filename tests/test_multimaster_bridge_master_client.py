@@ -1,0 +1,30 @@
+"""The bridge's client of its local master against a real rosmaster (port 0): an unchanged graph costs one
+request and no parsing; any change in the graph gives a new snapshot with it."""
+import xmlrpc.client
+
+from cnr_harness import RosMaster
+from multimaster_bridge.node import MasterClient
+
+
+def test_an_unchanged_graph_gives_the_same_snapshot_and_a_change_a_new_one():
+    with RosMaster() as master:
+        px = xmlrpc.client.ServerProxy(master.uri)
+        px.registerPublisher('/talker', '/chatter', 'std_msgs/String', 'http://127.0.0.1:10001/')
+        client = MasterClient(master.uri, '/bridge')
+        first = client.snapshot(None, True)
+        assert first.types['/chatter'] == 'std_msgs/String' and first.nodes['/talker'] == 'http://127.0.0.1:10001/'
+        assert client.snapshot(first, False) is first
+        assert client.snapshot(first, True) is not first        # a refresh is never skipped
+
+        px.registerPublisher('/other', '/scan', 'sensor_msgs/LaserScan', 'http://127.0.0.1:10002/')
+        second = client.snapshot(first, False)
+        assert second is not first
+        assert second.types['/scan'] == 'sensor_msgs/LaserScan' and second.nodes['/other'] == 'http://127.0.0.1:10002/'
+        assert client.snapshot(second, False) is second
+
+        px.unregisterPublisher('/other', '/scan', 'http://127.0.0.1:10002/')
+        third = client.snapshot(second, False)
+        assert '/scan' not in third.pubs and '/other' not in third.node_names()
+        client.reset()                                          # a new connection parses afresh
+        fourth = client.snapshot(third, False)
+        assert fourth is not third and fourth == third
