@@ -377,3 +377,35 @@ def test_an_analysis_names_the_command_that_made_the_rows(tmp_path):
     assert _command(args) == f'`launch_scripts/exp_campaign.sh --analyse-only --out {tmp_path}`'
     (tmp_path / 'command.txt').write_text('launch_scripts/exp_campaign.sh --conditions 7 --seed 3\n')
     assert _command(args).startswith('`launch_scripts/exp_campaign.sh --conditions 7 --seed 3` (analysed by ')
+
+
+def test_a_placement_not_made_is_evaluated_as_what_ran_and_a_split_one_is_not_learned(tmp_path):
+    a = advisor(tmp_path)
+    d, hosts, _ = a.begin('corridor_round_trip', 'corridor', GOOD, 0.0, force=OFFLOAD)
+    a.placed(0.0, 0, {'move_base': 'robot'})                 # the migration to the cloud was rolled back
+    assert a.running.placement == ONLOAD
+    row, _ = a.finish(COMPLETED, 29.0, 0.0029, 1.7e9, learn=True)
+    assert (row.decision, row.placement, row.label, a.learned) == (ONLOAD, 'move_base=robot', ONLOAD, True)
+    rows, _ = TrainingSet(str(tmp_path / 'training'), 'corridor_round_trip', 'corridor').read()
+    assert [(r.decision, r.placement) for r in rows] == [(ONLOAD, 'move_base=robot')]
+    # mid-task: a re-decision whose migration failed leaves the placement (and the re-decider) where it was
+    a = advisor(tmp_path, dwell=2.0, max_migrations=2, window=30.0, margin=0.8)
+    a.begin('corridor_round_trip', 'corridor', GOOD, 100.0)              # cold start: offload
+    a.placed(100.0, 1, {'move_base': 'cloud'})
+    a.observe(BAD, 101.0)
+    assert a.observe(BAD, 104.0)[0] == ONLOAD
+    a.switched({'move_base': 'cloud'})
+    assert a.running.placement == OFFLOAD and a.running.redecider.placement == OFFLOAD
+    row, _ = a.finish(COMPLETED, 30.0, 0.003, 1.7e9 + 1, learn=True)
+    assert row.placement == 'move_base=cloud' and row.decision == OFFLOAD
+
+
+def test_a_split_placement_is_evaluated_but_not_learned(tmp_path):
+    a = advisor(tmp_path)                                   # patrol places mfg and global_goal_manager
+    write_control_values(a.cfg.control_values, dataclasses.replace(CONTROL, task='patrol'))
+    a.begin('patrol', 'corridor', GOOD, 0.0, force=OFFLOAD)
+    a.placed(0.0, 1, {'mfg': 'cloud', 'global_goal_manager': 'robot'})
+    assert a.running.placement == 'split' and a.running.redecider is None
+    row, _ = a.finish(COMPLETED, 29.0, 0.0029, 1.7e9, learn=True)
+    assert row.placement == 'mfg=cloud,global_goal_manager=robot' and not a.learned
+    assert TrainingSet(str(tmp_path / 'training'), 'patrol', 'corridor').read()[0] == []

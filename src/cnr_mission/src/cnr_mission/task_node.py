@@ -189,8 +189,9 @@ class TaskRunner:
             e = self.evaluate(status, t_task, b_task if math.isfinite(b_task) else 0.0, r.learn)
             self.say(f'evaluation: {e.message}')
             if e.ok:
+                # decision: what ran (a placement not made is evaluated as the one the task started with)
                 row.update(value=e.result.value, good=e.result.good, label=e.result.label, learned=e.result.learned,
-                           placement=e.result.placement)
+                           placement=e.result.placement, decision=e.result.decision)
         else:
             self.say(f'{status}: T {t_task:.1f} s, B {b_task:.5f}')
         row['wall_time'] = round(time.monotonic() - w0, 2)

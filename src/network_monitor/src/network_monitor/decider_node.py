@@ -93,8 +93,10 @@ class DeciderNode:
                   hosts: Dict[str, str], waited: float) -> None:
         try:
             t0 = time.monotonic()
-            placed, moved, message = self.place(hosts)
-            out = self._message('redecided', task, location, placement, d, profile_of(msg), hosts)
+            placed, moved, message, now = self.place(hosts)
+            with self.lock:
+                self.advisor.switched(now)
+            out = self._message('redecided', task, location, placement, d, profile_of(msg), now)
             out.reason, out.placed, out.placing_time, out.migrations, out.message = \
                 REDECISION, placed, time.monotonic() - t0, moved, f'wanted for {waited:.1f} s; {message}'
 
@@ -104,14 +106,17 @@ class DeciderNode:
                 self.migrating = False
 
     # ---------------------------------------------------------------- placing
-    def place(self, hosts: Dict[str, str]) -> Tuple[bool, int, str]:
+    def place(self, hosts: Dict[str, str]) -> Tuple[bool, int, str, Dict[str, str]]:
         """Order each module to its host (one at a time; the manager's ``~migrate`` returns when it is done or
         refused, and refuses a module that is already there). The manager is asked every time rather than
         trusting the last placement message, which may lag behind a migration that just finished. Returns (all
-        placed, migrations done, a message)."""
+        placed, migrations done, a message, where each module is active now: a refused or rolled-back
+        migration leaves it where it was, '' if it is active nowhere)."""
         moved, placed, notes = 0, 0, []
+        now: Dict[str, str] = {}
         for module, host in hosts.items():
-            if self._settled(module) is None:
+            now[module] = self._settled(module) or ''
+            if not now[module]:
                 notes.append(f'{module} -> {host}: not ordered (not active anywhere within '
                              f'{self.placement_timeout:g} s)')
                 continue
@@ -123,13 +128,15 @@ class DeciderNode:
             if res.ok and res.outcome == 'done':
                 moved += 1
                 placed += 1
+                now[module] = host
                 notes.append(f'{module} -> {host} in {res.duration:.1f} s ({res.message})')
             elif res.outcome == 'refused' and f'already on {host}' in res.message:
                 placed += 1
+                now[module] = host
                 notes.append(f'{module} already on {host}')
             else:
                 notes.append(f'{module} -> {host}: {res.outcome} ({res.message})')
-        return placed == len(hosts), moved, '; '.join(notes)
+        return placed == len(hosts), moved, '; '.join(notes), now
 
     def _settled(self, module: str) -> Optional[str]:
         """Where ``module`` is active once it is not starting or migrating (waits up to placement_timeout: the
@@ -170,7 +177,7 @@ class DeciderNode:
             with self.lock:
                 away = [m for m, h in home.items() if self.active.get(m, h) != h]
             if away:        # their traffic (a cloud move_base is sent the laser scans) would load the link measured
-                placed, moved, message = self.place(home)
+                placed, moved, message, _ = self.place(home)
                 home_note = f'brought home first ({message}; {time.monotonic() - t0:.1f} s): '
                 t0 = time.monotonic()   # their traffic may still be queued on the link: the window fills anew
                 if not placed:
@@ -202,10 +209,14 @@ class DeciderNode:
         for w in warnings:
             rospy.logwarn(f'migration_decider: {w}')
         t0 = time.monotonic()
-        placed, moved, message = self.place(hosts)
+        placed, moved, message, now = self.place(hosts)
         with self.lock:
-            self.advisor.placed(time.monotonic(), moved)
-        out = self._message('decided', req.task, req.location, d.decision, d, profile, hosts)
+            self.advisor.placed(time.monotonic(), moved, now)
+        if not placed:
+            ran = self.advisor.placement_of(req.task, now)
+            message += ('; placement not made: ' + (f'the task runs as {ran} and is evaluated as such' if ran else
+                                                    'the modules are split, the run is not learned'))
+        out = self._message('decided', req.task, req.location, d.decision, d, profile, now)
         out.placed, out.placing_time, out.migrations = placed, time.monotonic() - t0, moved
         why = {'knn': f'k-NN {d.votes.get(d.decision, 0)} of {self.cfg.decision.k} votes',
                'cold_start': 'cold-start rule', 'explore': f'exploration (policy: {d.policy})',
@@ -228,11 +239,11 @@ class DeciderNode:
                 return EvaluateTaskResponse(ok=False, message=str(exc))
         d = running.decision
         out = self._message('evaluated', row.task, row.location, row.decision, d, running.profile,
-                            self.advisor.hosts(row.task, running.placement))
+                            running.history[-1])
         out.placement = row.placement
         out.mission_status, out.t_task, out.b_task, out.value, out.good, out.label = \
             row.mission_status, row.t_task, row.b_task, row.value, row.good, row.label
-        out.learned = bool(req.learn and running.profile.usable)
+        out.learned = self.advisor.learned
         out.message = (f'{row.decision} {row.mission_status}: T {row.t_task:.1f} s (CT {control.ct_mean:.1f}), '
                        f'B {row.b_task:.5f} (CB {control.cb_mean:.5f}), value {row.value:.3f} '
                        f'{"<=" if row.good else ">"} V_r {self.cfg.v_r:g}: label {row.label}'

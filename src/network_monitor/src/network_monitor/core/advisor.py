@@ -5,13 +5,19 @@ holds one :class:`~network_monitor.core.decision.Decider` per âŸ¨task, locationâ
 retrained after each row appended) and, while a task runs, a :class:`~network_monitor.core.hysteresis.ReDecider`::
 
     begin(task, location, profile, now, force)  -> Decision and the placement to make (before the task)
-    placed(now, moved)                          -> the initial migrations count in the re-decision's budget
+    placed(now, moved, hosts)                   -> the initial migrations count in the re-decision's budget;
+                                                   where the modules really are (a migration may be refused)
     observe(profile, now)                       -> a new placement to migrate to mid-task, or None
+    switched(hosts)                             -> where the modules are after that migration
     finish(status, t_task, b_task, timestamp)   -> the evaluated Row (Eq. 4-5, label), appended when asked
 
 A *forced* placement (control runs, the second run of a paired condition) is run and evaluated like a decision
 (``reason`` ``forced``); it is marked ``explored`` when it differs from what the policy would have chosen, as an
 exploration is. Forced and explored placements are not re-decided during the task. The row records the placement at the start and each mid-task change (``move_base=cloud>robot``).
+
+A task is evaluated as what ran: when a migration was refused or rolled back and every module stayed on the
+other host, the row's decision is that other placement (and ``explored`` if the policy wanted otherwise); when
+the modules ended split between the hosts, the run is evaluated but not learned (no placement to label).
 """
 from __future__ import annotations
 
@@ -27,6 +33,7 @@ from network_monitor.core.hysteresis import ReDecider
 from network_monitor.core.training import LOCAL, Row
 
 FORCED = 'forced'
+SPLIT = 'split'             # the running placement when the task's modules are on both hosts
 REDECISION = 'redecision'
 
 
@@ -53,7 +60,7 @@ class RunningTask:
     decision: Decision
     started: float                              # monotonic [s]
     placement: str                              # offload | onload now
-    history: List[str] = field(default_factory=list)   # placements in order (start, then each switch)
+    history: List[Dict[str, str]] = field(default_factory=list)   # module -> host in order (start, each switch)
     redecider: Optional[ReDecider] = None
 
 
@@ -74,6 +81,7 @@ class TaskAdvisor:
         self.rng = rng if rng is not None else random.Random(cfg.decision.exploration.seed)
         self._deciders: Dict[Tuple[str, str], Decider] = {}
         self.running: Optional[RunningTask] = None
+        self.learned = False        # whether the last finished task's row was appended to its training set
 
     # ---------------------------------------------------------------- training sets
     def decider(self, task: str, location: str) -> Tuple[Decider, List[str]]:
@@ -114,7 +122,7 @@ class TaskAdvisor:
                          policy.votes.get(force, 0) / self.cfg.decision.k if policy.votes else 1.0)
         else:
             d = decider.decide(c_l, r_bw) if explore else decider.policy(c_l, r_bw)
-        self.running = RunningTask(task, location, profile, d, now, d.decision, [d.decision])
+        self.running = RunningTask(task, location, profile, d, now, d.decision, [self.hosts(task, d.decision)])
         return d, self.hosts(task, d.decision), warnings
 
     def hosts(self, task: str, decision: str) -> Dict[str, str]:
@@ -122,12 +130,22 @@ class TaskAdvisor:
         host = self.cfg.cloud_host if decision != ONLOAD else self.cfg.robot_host
         return {m: host for m in self.cfg.tasks[task]}
 
-    def placed(self, now: float, moved: int) -> None:
-        """The placement before the task is made (``moved`` migrations); re-deciding starts now, unless the
-        placement was forced or explored: that one is held for the whole task, so that its outcome measures it
-        (a paired run's oracle, an exploration's lesson)."""
+    def placement_of(self, task: str, hosts: Dict[str, str]) -> Optional[str]:
+        """offload or onload when ``hosts`` is one of the two placements of ``task``, None when split."""
+        for decision in DECISIONS:
+            if hosts == self.hosts(task, decision):
+                return decision
+        return None
+
+    def placed(self, now: float, moved: int, hosts: Optional[Dict[str, str]] = None) -> None:
+        """The placement before the task is made (``moved`` migrations), the modules active on ``hosts``
+        (None: as decided); re-deciding starts now, unless the placement was forced or explored: that one is
+        held for the whole task, so that its outcome measures it (a paired run's oracle, an exploration's
+        lesson)."""
         r = self._need_running()
-        if r.decision.reason in (FORCED, EXPLORE):
+        if hosts is not None:
+            self._ran(r, hosts)
+        if r.decision.reason in (FORCED, EXPLORE) or r.placement not in DECISIONS:    # split: not re-decided
             return
         r.redecider = ReDecider(self.cfg.redecision, r.placement)
         for _ in range(moved):
@@ -147,8 +165,22 @@ class TaskAdvisor:
         if switch is None:
             return None
         r.placement = switch
-        r.history.append(switch)
+        r.history.append(self.hosts(r.task, switch))
         return switch, d
+
+    def switched(self, hosts: Dict[str, str]) -> None:
+        """Where the modules are after a mid-task migration (:meth:`observe`'s): a refused or rolled-back one
+        leaves them where they were."""
+        r = self.running
+        if r is not None:
+            self._ran(r, hosts)
+            if r.redecider is not None and r.placement in DECISIONS:
+                r.redecider.placement = r.placement
+
+    def _ran(self, r: RunningTask, hosts: Dict[str, str]) -> None:
+        r.history[-1] = {m: hosts.get(m, '') for m in self.cfg.tasks[r.task]}
+        ran = self.placement_of(r.task, r.history[-1])
+        r.placement = ran if ran is not None else SPLIT
 
     def finish(self, mission_status: str, t_task: float, b_task: float, timestamp: float,
                learn: bool) -> Tuple[Row, ControlValues]:
@@ -161,18 +193,21 @@ class TaskAdvisor:
         """
         r = self._need_running()
         control = self.control(r.task)
-        ev = evaluate(r.decision.decision, mission_status, t_task, b_task, control, self.cfg.v_r)
-        hosts = [self.hosts(r.task, p) for p in r.history]
-        placement = ','.join(f'{m}=' + '>'.join(_dedup([h[m] for h in hosts])) for m in self.cfg.tasks[r.task])
+        ran = self.placement_of(r.task, r.history[0])          # what the task started with
+        decision = ran if ran is not None else r.decision.decision
+        ev = evaluate(decision, mission_status, t_task, b_task, control, self.cfg.v_r)
+        placement = ','.join(f'{m}=' + '>'.join(_dedup([h[m] or '?' for h in r.history]))
+                             for m in self.cfg.tasks[r.task])
         p = r.profile
         row = Row(r_bw=p.r_bw if p.usable else math.nan, c_l=p.c_l if p.usable else math.nan,
-                  decision=r.decision.decision, mission_status=mission_status, b_task=float(b_task),
+                  decision=decision, mission_status=mission_status, b_task=float(b_task),
                   t_task=float(t_task), timestamp=float(timestamp), task=r.task, location=r.location,
                   placement=placement, rtt_spread=p.rtt_spread, loss=p.loss,
                   profile_method=p.method if p.method in ('probe', 'passive') else 'passive',
                   value=ev.value, good=ev.good, label=ev.label,
-                  explored=r.decision.decision != r.decision.policy, source=LOCAL)
-        if learn and p.usable:
+                  explored=decision != r.decision.policy, source=LOCAL)
+        self.learned = bool(learn and p.usable and ran is not None)
+        if self.learned:
             self.cfg.training_set(r.task, r.location).append(row)
         self.running = None
         return row, control
