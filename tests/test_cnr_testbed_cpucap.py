@@ -205,3 +205,14 @@ def test_a_group_breaks_its_cpu_down_by_process(tmp_path):
     totals = cg.by_process()
     assert list(totals) == [core.process_label(open('/proc/self/cmdline').read().split('\0')[:-1]) or 'python3']
     assert next(iter(totals.values())) > 0
+
+
+def test_cpu_shares_over_a_window():
+    before = {10: ('move_base', 5.0), 11: ('bridge', 2.0), 12: ('rosout', 1.0), 13: ('mfg', 3.0)}
+    after = {10: ('move_base', 7.0), 11: ('bridge', 2.5), 14: ('mfg', 0.4), 15: ('mfg', 0.1),
+             13: ('other', 9.0)}                                   # pid 13 reused by another program
+    shares = core.cpu_shares(before, after, 10.0)
+    assert shares == pytest.approx({'move_base': 0.2, 'bridge': 0.05, 'mfg': 0.05, 'other': 0.9})
+    assert list(shares)[0] == 'other'                              # largest first
+    with pytest.raises(ValueError):
+        core.cpu_shares(before, after, 0.0)

@@ -3,6 +3,7 @@
     python3 -m cnr_testbed.cpucap create [--name N] [--cpus Q] [--period-us P]
     python3 -m cnr_testbed.cpucap run    [--name N] [--cpus Q] [--period-us P] -- CMD [ARGS...]
     python3 -m cnr_testbed.cpucap status [--name N] [--json]
+    python3 -m cnr_testbed.cpucap top    [--name N] [--seconds S]
     python3 -m cnr_testbed.cpucap remove [--name N] [--kill]
 
 ``run`` creates the cgroup if it is missing (limit from the config or the options), moves itself into it and
@@ -13,7 +14,10 @@ usable cgroup (not root, no cpu controller) ``run`` prints one line and runs CMD
 
 Defaults: the name is ``cnr_robot_<testbed.name>``, the limit ``testbed.robot_cpu`` of config/testbed.yaml
 (``--cpus`` is a fraction of one CPU: 0.25 = a quarter of a core). ``remove`` moves the processes still
-inside to the parent cgroup (``--kill``: kills them) and deletes the group.
+inside to the parent cgroup (``--kill``: kills them) and deletes the group. ``top`` watches the group for S
+seconds (default 20) and prints what each kind of process used (a ROS node by its name), in CPUs, beside the
+limit and the share of CFS periods in which the group was throttled: what the robot's computer spends its
+budget on.
 
 Python::
 
@@ -157,6 +161,20 @@ class CpuCgroup:
                 continue
         return sorted(out)
 
+    def times_by_pid(self) -> Dict[int, Tuple[str, float]]:
+        """pid -> (label as in :meth:`by_process`, CPU time [s] so far) of each process now in the group."""
+        import psutil
+        out: Dict[int, Tuple[str, float]] = {}
+        for pid in self.pids():
+            try:
+                proc = psutil.Process(pid)
+                label = core.process_label(proc.cmdline()) or proc.name()
+                t = proc.cpu_times()
+            except (psutil.NoSuchProcess, psutil.AccessDenied):
+                continue
+            out[pid] = (label, t.user + t.system)
+        return out
+
     def by_process(self) -> Dict[str, float]:
         """CPU time [s] used so far by each kind of process now in the group (:func:`core.process_label`: a ROS
         node's name, else the program), largest first. Processes that have already exited are not counted (their
@@ -285,7 +303,7 @@ def parser() -> argparse.ArgumentParser:
                                  epilog=__doc__.split('Python::')[0])
     ap.add_argument('--config', default=CONFIG, help='testbed YAML (testbed.name, testbed.robot_cpu)')
     sub = ap.add_subparsers(dest='cmd', required=True)
-    for cmd in ('create', 'run', 'status', 'remove'):
+    for cmd in ('create', 'run', 'status', 'top', 'remove'):
         p = sub.add_parser(cmd)
         p.add_argument('--config', default=argparse.SUPPRESS)
         p.add_argument('--name', help='cgroup name (default cnr_robot_<testbed.name>)')
@@ -296,6 +314,8 @@ def parser() -> argparse.ArgumentParser:
             p.add_argument('command', nargs=argparse.REMAINDER, help='-- CMD [ARGS...]')
         if cmd == 'status':
             p.add_argument('--json', action='store_true')
+        if cmd == 'top':
+            p.add_argument('--seconds', type=float, default=20.0, help='window [s] (default 20)')
         if cmd == 'remove':
             p.add_argument('--kill', action='store_true', help='kill the processes still inside')
     return ap
@@ -323,6 +343,34 @@ def _join(args: argparse.Namespace, cfg: TestbedConfig, name: str) -> None:
         cg.create(args.cpus if args.cpus is not None else cfg.robot_cpu.cpus,
                   args.period_us if args.period_us is not None else cfg.robot_cpu.period_us)
     cg.add(os.getpid())
+
+
+def _top(cg: 'CpuCgroup', name: str, seconds: float) -> int:
+    if not seconds > 0:
+        _say(f'--seconds must be > 0, got {seconds:g}')
+        return 2
+    if not cg.exists():
+        _say(f'cgroup {name}: absent (is the testbed up?)')
+        return 1
+    cpus, _period = cg.limit()
+    before, th0, t0 = cg.times_by_pid(), cg.throttling(), time.monotonic()
+    u0 = cg.usage_seconds() if cg.acct_dir is not None else None
+    _say(f'watching cgroup {name} for {seconds:g} s ...')
+    time.sleep(seconds)
+    after, th1, dt = cg.times_by_pid(), cg.throttling(), time.monotonic() - t0
+    u1 = cg.usage_seconds() if cg.acct_dir is not None else None
+    shares = core.cpu_shares(before, after, dt)
+    width = max([len(k) for k in shares] + [7])
+    for label, share in shares.items():
+        print(f'{label:<{width}}  {share:.3f}')
+    total = sum(shares.values())
+    print(f'{"total":<{width}}  {total:.3f} CPU (processes alive at the end)')
+    if u0 is not None and u1 is not None:
+        print(f'{"cgroup":<{width}}  {(u1 - u0) / dt:.3f} CPU (exited processes included)')
+    lim = 'unlimited' if cpus is None else f'{cpus:.3f} CPU'
+    periods, throttled = th1.periods - th0.periods, th1.throttled - th0.throttled
+    print(f'limit {lim}; throttled in {throttled} of {periods} periods over {dt:.1f} s')
+    return 0
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
@@ -373,6 +421,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 use = 'n/a' if st['usage_seconds'] is None else f"{st['usage_seconds']:.3f} s"
                 print(f"cgroup {name} (v{st['version']}): {lim}; used {use}; throttled in {st['throttled']} of "
                       f"{st['periods']} periods ({st['throttled_seconds']:.3f} s); pids {st['pids']}")
+        elif args.cmd == 'top':
+            return _top(CpuCgroup(detect(), name), name, args.seconds)
         elif args.cmd == 'remove':
             try:
                 cg = CpuCgroup(detect(), name)

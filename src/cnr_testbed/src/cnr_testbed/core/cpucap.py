@@ -235,3 +235,22 @@ def process_label(cmdline: List[str]) -> str:
     if prog.startswith('python') and len(args) > 1:
         prog = os.path.basename(args[1])
     return prog
+
+
+def cpu_shares(before: Dict[int, Tuple[str, float]], after: Dict[int, Tuple[str, float]],
+               seconds: float) -> Dict[str, float]:
+    """CPU used per kind of process over a window, in CPUs (CPU seconds per second), largest first.
+
+    Args:
+        before, after: pid -> (label, CPU time [s]) at the window's start and end. A process only in ``after``
+            started in the window: all its time counts; one only in ``before`` exited: its last part is lost
+            (the cgroup's own usage has it).
+        seconds: the window's length.
+    """
+    if not seconds > 0:
+        raise ValueError(f'the window must be > 0 s, got {seconds}')
+    shares: Dict[str, float] = {}
+    for pid, (label, t1) in after.items():
+        t0 = before[pid][1] if pid in before and before[pid][0] == label else 0.0
+        shares[label] = shares.get(label, 0.0) + max(0.0, t1 - t0) / seconds
+    return dict(sorted(shares.items(), key=lambda kv: -kv[1]))
