@@ -211,7 +211,9 @@ def _result(cid, run, decision, status, t, b, rtt=20.0, c_l=0.02, r_bw=50.0):
 def test_pairs_and_oracle():
     rows = [_result('c1', 'decided', OFFLOAD, COMPLETED, 28, 0.0027), _result('c1', 'other', ONLOAD, COMPLETED, 30, 0.003),
             _result('c2', 'decided', ONLOAD, COMPLETED, 30, 0.003), _result('c2', 'other', OFFLOAD, ABORTED, 9, 0.001),
-            _result('c3', 'decided', ONLOAD, COMPLETED, 30, 0.003)]          # unpaired: left out
+            _result('c3', 'decided', ONLOAD, COMPLETED, 30, 0.003),          # unpaired: left out
+            _result('c4', 'decided', ONLOAD, COMPLETED, 30, 0.003),
+            dict(_result('c4', 'other', OFFLOAD, ABORTED, 9, 0.001), placed='0')]   # placement not made: out
     ps = campaign.pairs(rows)
     assert [p.condition for p in ps] == ['c1', 'c2']
     assert [campaign.oracle(p, CONTROL) for p in ps] == [OFFLOAD, ONLOAD]
@@ -371,9 +373,9 @@ def test_control_values_from_the_all_local_rows_of_a_results_file(tmp_path):
 
 def test_an_analysis_names_the_command_that_made_the_rows(tmp_path):
     """--analyse-only reports the campaign's own command (its command.txt), and itself beside it."""
-    import argparse
+    from cnr_benchmarks.campaign import parse_args
     from cnr_benchmarks.campaign_figures import _command
-    args = argparse.Namespace(out=str(tmp_path), argv=['--analyse-only', '--out', str(tmp_path)])
+    args = parse_args(['analyse', '--out', str(tmp_path)])      # as exp_campaign.sh --analyse-only calls it
     assert _command(args) == f'`launch_scripts/exp_campaign.sh --analyse-only --out {tmp_path}`'
     (tmp_path / 'command.txt').write_text('launch_scripts/exp_campaign.sh --conditions 7 --seed 3\n')
     assert _command(args).startswith('`launch_scripts/exp_campaign.sh --conditions 7 --seed 3` (analysed by ')

@@ -313,6 +313,8 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
     args = ap.parse_args(argv)
     args.argv = list(argv if argv is not None else sys.argv[1:])
     args.argv.remove(args.cmd)          # the script's own arguments (the subcommand is the script's choice)
+    if args.cmd == 'analyse':
+        args.argv.insert(0, '--analyse-only')       # exp_campaign.sh's spelling of the subcommand
     suffix = f'_slowdown{args.slowdown:g}' if getattr(args, 'slowdown', None) is not None else ''
     if args.out is None:
         args.out = os.path.join(report.WS, 'bench_results', *(('control', f'{args.task}@{args.location}{suffix}')

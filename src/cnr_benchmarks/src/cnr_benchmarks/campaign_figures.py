@@ -271,12 +271,17 @@ def write_analysis(args: argparse.Namespace) -> int:
 
     def acc(c: Optional[Dict], key: str) -> str:
         return f'{_fmt(100 * c[key], 0)} %' if c else '–'
+    paired_ids = {p.condition for p in pairs}
+    unpaired = sorted({r['condition'] for r in rows} - paired_ids)
+    not_placed = sorted({r['id'] for r in rows if r.get('placed') == '0'})
     lines = [
         f'# Continuous experiment (thesis §5)\n',
         f'{_command(args)}: {len(rows)} runs, {len(pairs)} paired conditions '
         f'({n_train} training, {n_test} held out), {wall / 3600:.2f} h of runs; control values: CT '
         f'{control.ct_mean:.2f} s, CB {control.cb_mean:.6f} ({control.runs} runs, {control.date}).'
-        + (f' Left out (--exclude): {", ".join(excluded)}.' if excluded else '') + '\n',
+        + (f' Left out (--exclude): {", ".join(excluded)}.' if excluded else '')
+        + (f' Without a pair: {", ".join(unpaired)}' + (f' (a placement not made: {", ".join(not_placed)})'
+                                                        if not_placed else '') + '.' if unpaired else '') + '\n',
         budget,
         'Runs by placement and status: ' + ', '.join(f'{d} {s}: {n}' for (d, s), n in sorted(statuses.items()))
         + '\n',

@@ -149,7 +149,7 @@ def outcome(row: Dict[str, str]) -> Outcome:
 
 
 def pairs(rows: Sequence[Dict[str, str]], k: int = 5) -> List[Pair]:
-    """The conditions with both placements finished, in order. The condition's decision is its first run's:
+    """The conditions with both placements finished (and made), in order. The condition's decision is its first run's:
     the decision it ran, or when that run was forced (this campaign's onload-first plans) the policy it
     recorded, made by k-NN once ``k`` rows with a usable profile had been learned, by the cold-start rule
     before."""
@@ -165,7 +165,9 @@ def pairs(rows: Sequence[Dict[str, str]], k: int = 5) -> List[Pair]:
             learned += 1
     out = []
     for c, runs in by.items():
-        placed = {r['decision']: r for r in runs if r['decision'] in (OFFLOAD, ONLOAD)}
+        # a run whose placement was not made (placed 0: a migration rolled back) did not measure its placement
+        # (rows from before 2026-11-26 still carry the decided placement as their decision)
+        placed = {r['decision']: r for r in runs if r['decision'] in (OFFLOAD, ONLOAD) and r.get('placed') != '0'}
         if set(placed) != {OFFLOAD, ONLOAD}:
             continue
         first, off, on = runs[0], placed[OFFLOAD], placed[ONLOAD]
