@@ -179,16 +179,9 @@ class CpuCgroup:
         """CPU time [s] used so far by each kind of process now in the group (:func:`core.process_label`: a ROS
         node's name, else the program), largest first. Processes that have already exited are not counted (their
         time is in :meth:`usage_seconds`)."""
-        import psutil
         totals: Dict[str, float] = {}
-        for pid in self.pids():
-            try:
-                proc = psutil.Process(pid)
-                label = core.process_label(proc.cmdline()) or proc.name()
-                t = proc.cpu_times()
-            except (psutil.NoSuchProcess, psutil.AccessDenied):
-                continue
-            totals[label] = totals.get(label, 0.0) + t.user + t.system
+        for label, t in self.times_by_pid().values():
+            totals[label] = totals.get(label, 0.0) + t
         return dict(sorted(totals.items(), key=lambda kv: -kv[1]))
 
     def usage_seconds(self) -> float:
