@@ -28,3 +28,20 @@ def test_an_unchanged_graph_gives_the_same_snapshot_and_a_change_a_new_one():
         client.reset()                                          # a new connection parses afresh
         fourth = client.snapshot(third, False)
         assert fourth is not third and fourth == third
+
+
+def test_a_subscribed_only_topic_keeps_its_type_between_refreshes():
+    """Its type comes from getTopicTypes at a refresh; a poll in between must not drop it (the exported state
+    would flip between the type and '*', and the peer re-register the subscriber proxy each time)."""
+    with RosMaster() as master:
+        px = xmlrpc.client.ServerProxy(master.uri)
+        px.registerPublisher('/talker', '/chatter', 'std_msgs/String', 'http://127.0.0.1:10001/')
+        px.registerSubscriber('/listener', '/cmd', 'geometry_msgs/Twist', 'http://127.0.0.1:10002/')
+        client = MasterClient(master.uri, '/bridge')
+        first = client.snapshot(None, True)
+        assert first.types == {'/chatter': 'std_msgs/String', '/cmd': 'geometry_msgs/Twist'}
+        px.registerSubscriber('/other', '/chatter', 'std_msgs/String', 'http://127.0.0.1:10003/')   # no new topic
+        second = client.snapshot(first, False)
+        assert second is not first and second.types == first.types
+        px.unregisterSubscriber('/listener', '/cmd', 'http://127.0.0.1:10002/')
+        assert client.snapshot(second, False).types == {'/chatter': 'std_msgs/String'}

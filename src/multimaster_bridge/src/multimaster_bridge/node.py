@@ -114,7 +114,11 @@ class MasterClient:
             code, _, types = self._proxy().getTopicTypes(self.caller_id)
             types = types if code == 1 else []
         else:
-            types = [(t, previous.types[t]) for t in published]
+            # every topic still there keeps its type, subscribed-only ones too: dropping those between refreshes
+            # flipped their type to '*' in the exported state and back at each refresh (a peer then unregistered
+            # and registered the subscriber proxy twice a second)
+            current = published | {t for t, nodes in state[1] if nodes}
+            types = [(t, ty) for t, ty in previous.types.items() if t in current]
         return sync.Snapshot.from_system_state(state, types)
 
     def snapshot(self, previous: Optional[sync.Snapshot], refresh_nodes: bool) -> sync.Snapshot:
