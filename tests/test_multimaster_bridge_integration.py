@@ -229,6 +229,24 @@ def test_a_subscriber_hears_the_publishers_of_both_hosts(bridged):
                  f'the {side.side} subscriber to hear both publishers')
 
 
+def test_a_steady_graph_is_not_registered_again(bridged):
+    """A subscribed-only topic, once imported, stays as it is: no unregister/register over the bridge's
+    once-a-second refreshes (its type used to flip to '*' between them)."""
+    tb, robot, cloud, procs = bridged
+    cloud.run(['rostopic', 'echo', '/chatter'], 'echo_only')
+    wait_until(lambda: any(n.startswith('/cloud/') for t, nodes in robot.call('getSystemState')[1]
+                           if t == '/chatter' for n in nodes), 20, 'the cloud subscriber on the robot master')
+    seen = {'count': -1, 'since': time.monotonic()}
+
+    def quiet_for(seconds):
+        n = lines(procs[0], 'registrations in')
+        if n != seen['count']:
+            seen.update(count=n, since=time.monotonic())
+        return time.monotonic() - seen['since'] >= seconds
+    wait_until(lambda: quiet_for(3.5), 20, "the robot bridge's registrations to stay unchanged for 3.5 s "
+                                           "(3 refreshes)", interval=0.1)
+
+
 def test_a_stopped_bridge_leaves_no_proxy_behind(bridged):
     tb, robot, cloud, procs = bridged
     cloud.run(['rostopic', 'pub', '-r', '20', '/chatter', 'std_msgs/String', 'data: remote'], 'pub')
