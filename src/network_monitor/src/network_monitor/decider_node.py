@@ -25,7 +25,7 @@ from cnr_msgs.msg import NetworkProfile, Placement, TaskDecision
 from cnr_msgs.srv import (Decide, DecideResponse, EvaluateTask, EvaluateTaskResponse, Migrate, ProfileNow)
 from cnr_params import ConfigError, Section
 from cnr_params.ros import init_node, private_section
-from network_monitor.core.advisor import REDECISION, AdvisorError, Profile, TaskAdvisor
+from network_monitor.core.advisor import REDECISION, AdvisorError, Profile, RunningTask, TaskAdvisor
 from network_monitor.core.decision import Decision
 from network_monitor.core.decision_config import decision_config
 from network_monitor.core.evaluation import OFFLOAD, ONLOAD
@@ -86,16 +86,18 @@ class DeciderNode:
         rospy.loginfo(f'migration_decider: re-decision during {running.task}@{running.location}: {placement} '
                       f'(RTT {1000 * msg.rtt:.0f} ms, R_bw {msg.r_bw:.3g}, votes {d.votes or "rule"}; wanted for '
                       f'{running.redecider.waited:.1f} s)')
-        threading.Thread(target=self._redecide, args=(running.task, running.location, placement, d, msg, hosts,
-                                                      running.redecider.waited), daemon=True).start()
+        threading.Thread(target=self._redecide, args=(running, placement, d, msg, hosts, running.redecider.waited),
+                         daemon=True).start()
 
-    def _redecide(self, task: str, location: str, placement: str, d: Decision, msg: NetworkProfile,
+    def _redecide(self, running: RunningTask, placement: str, d: Decision, msg: NetworkProfile,
                   hosts: Dict[str, str], waited: float) -> None:
+        task, location = running.task, running.location
         try:
             t0 = time.monotonic()
             placed, moved, message, now = self.place(hosts)
             with self.lock:
-                self.advisor.switched(now)
+                if self.advisor.running is running:      # (the task may have been evaluated meanwhile)
+                    self.advisor.switched(now)
             out = self._message('redecided', task, location, placement, d, profile_of(msg), now)
             out.reason, out.placed, out.placing_time, out.migrations, out.message = \
                 REDECISION, placed, time.monotonic() - t0, moved, f'wanted for {waited:.1f} s; {message}'
