@@ -45,3 +45,24 @@ def test_a_subscribed_only_topic_keeps_its_type_between_refreshes():
         assert second is not first and second.types == first.types
         px.unregisterSubscriber('/listener', '/cmd', 'http://127.0.0.1:10002/')
         assert client.snapshot(second, False).types == {'/chatter': 'std_msgs/String'}
+
+
+def test_a_service_with_a_new_provider_gets_the_new_providers_uri_between_refreshes():
+    """A migrated service: the old instance's registration replaced by the new one's (another node) between two
+    polls; the new one was known already (a standby: it subscribes before it is promoted). The snapshot must carry
+    the new URI at once, not the cached one until the next refresh (the peer would register its proxy pointing at
+    the old instance: calls failed for up to a second)."""
+    with RosMaster() as master:
+        px = xmlrpc.client.ServerProxy(master.uri)
+        px.registerService('/robot/ggm', '/next_goal', 'rosrpc://127.0.0.1:20001', 'http://127.0.0.1:10001/')
+        px.registerPublisher('/talker', '/chatter', 'std_msgs/String', 'http://127.0.0.1:10003/')
+        px.registerSubscriber('/ggm', '/chatter', 'std_msgs/String', 'http://127.0.0.1:10002/')   # the standby
+        client = MasterClient(master.uri, '/bridge')
+        first = client.snapshot(None, True)
+        assert first.service_apis['/next_goal'] == 'rosrpc://127.0.0.1:20001'
+        px.registerService('/ggm', '/next_goal', 'rosrpc://127.0.0.1:20002', 'http://127.0.0.1:10002/')
+        second = client.snapshot(first, False)
+        assert second.services['/next_goal'] == '/ggm'
+        assert second.service_apis['/next_goal'] == 'rosrpc://127.0.0.1:20002'
+        assert second.nodes['/ggm'] == 'http://127.0.0.1:10002/'
+        assert second.nodes['/talker'] == 'http://127.0.0.1:10003/'      # kept from before

@@ -262,6 +262,9 @@ def test_static_rule_fit_and_learning_curve():
     # the majority placement alone bounds how far any rule can be above never offloading (a static rule)
     assert campaign.constant_accuracy(ONLOAD, truth) == pytest.approx(0.6)
     assert campaign.constant_accuracy(OFFLOAD, truth + [campaign.EITHER]) == pytest.approx(9 / 21)
+    # a pair within the noise has a strict winner by chance: what a perfect decision can expect
+    assert campaign.strict_ceiling([ONLOAD, OFFLOAD, campaign.EITHER, campaign.EITHER]) == pytest.approx(0.75)
+    assert campaign.strict_ceiling([ONLOAD]) == 1.0 and math.isnan(campaign.strict_ceiling([]))
 
 
 def test_fits_and_crossings():

@@ -301,6 +301,10 @@ def write_analysis(args: argparse.Namespace) -> int:
         f'| best static threshold, same rows (RTT < {_fmt(1000 * last["rule_rtt"], 0) if last else "–"} ms, '
         f'R_bw > {_fmt(last["rule_r_bw"], 2) if last else "–"}) | MALMOS: k-NN +10.9–40.5 points | '
         f'{acc(last, "static")} | {acc(last, "static_noise")} |',
+        f'| the most any decision can expect against the strict labels of the held-out conditions: right beyond '
+        f'the noise, a coin flip on the {sum(1 for o in oracle_noise[n_train:] if o == core.EITHER)} of {n_test} '
+        f'within it (`strict_ceiling`) | goal ≥ 90 % | {_fmt(100 * core.strict_ceiling(oracle_noise[n_train:]), 0)} % '
+        f'| 100 % |',
         f'| the majority placement alone on the held-out conditions (never offload / always offload): a learned '
         f'rule can be at most 100 % minus the larger above a static rule | goal: +11 points needs < 89 % | '
         f'{const(oracle[n_train:])} | {const(oracle_noise[n_train:])} |',

@@ -127,11 +127,17 @@ class MasterClient:
             return snap
         names = sorted(snap.node_names())
         services = sorted(snap.services)
-        if (previous is not None and not refresh_nodes and set(names) <= set(previous.nodes)
-                and set(services) <= set(previous.service_apis)):
-            snap.nodes = {n: previous.nodes[n] for n in names}
-            snap.service_apis = {s: previous.service_apis[s] for s in services}
-            return snap
+        if previous is not None and not refresh_nodes:
+            # between refreshes only what is new is looked up: a node not seen before, and a service that is new
+            # or has another provider than before (its URI is the new provider's: a cached one kept a migrated
+            # service pointing at its old instance until the next refresh)
+            snap.nodes = {n: previous.nodes[n] for n in names if n in previous.nodes}
+            snap.service_apis = {s: previous.service_apis[s] for s in services
+                                 if s in previous.service_apis and previous.services.get(s) == snap.services[s]}
+            names = [n for n in names if n not in snap.nodes]
+            services = [s for s in services if s not in snap.service_apis]
+            if not names and not services:
+                return snap
         multi = xmlrpc.client.MultiCall(self._proxy())
         for n in names:
             multi.lookupNode(self.caller_id, n)

@@ -228,6 +228,15 @@ def constant_accuracy(placement: str, oracle_labels: Sequence[str]) -> float:
     return sum(1 for o in oracle_labels if agrees(placement, o)) / max(len(oracle_labels), 1)
 
 
+def strict_ceiling(noise_labels: Sequence[str]) -> float:
+    """The accuracy against the strict oracle that a decision right on every pair beyond the noise can expect:
+    on a pair within the noise (EITHER by the noise-aware oracle) the strict winner is the sign of the run-to-run
+    noise, either placement with chance 1/2, which no decision made before the runs can know. An accuracy
+    goal above it cannot be met on these conditions however the decision is learned."""
+    n = len(noise_labels)
+    return (n - 0.5 * sum(1 for o in noise_labels if o == EITHER)) / n if n else math.nan
+
+
 def static_rule_fit(rows: Sequence[Row]) -> Tuple[float, float]:
     """The best rule "offload iff C_l < a and R_bw > b" on the rows' labels: (a, b); (0, inf) = never offload."""
     best, best_ok = (0.0, math.inf), sum(1 for r in rows if r.label == ONLOAD)
