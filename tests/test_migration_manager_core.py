@@ -318,6 +318,10 @@ def test_config_from_the_workspace_and_errors_name_the_field(workspace):
     for dormant, field in (({'mfg': ['moon']}, 'mfg'), ({'mfg': 'robot'}, 'mfg'), (['move_base'], 'must map')):
         with pytest.raises(ConfigError, match=f'dormant.*{field}'):
             from_section(Section(dict(data, dormant=dormant), 'config/migration.yaml'))
+    assert cfg.replicate_period_authority >= cfg.replicate_period
+    missing = {k: v for k, v in data.items() if k != 'replicate_period_authority'}
+    with pytest.raises(ConfigError, match='replicate_period_authority'):
+        from_section(Section(missing, 'config/migration.yaml'))
     bad = dict(data, control_nice=-21)
     with pytest.raises(ConfigError, match='control_nice'):
         from_section(Section(bad, 'config/migration.yaml'))

@@ -91,6 +91,7 @@ class MoveBaseNode(Hooks):
         self.reconfigure_servers: List[ReconfigureServer] = []
         self.ready = threading.Event()           # the node is complete (the instance may be promoted before)
         self.dormant = False                     # retired and asleep: no sensor subscriptions, costmaps paused
+        self.activated_at: Optional[float] = None   # monotonic time of the last activation, until its first command
         self.server = TakeoverActionServer('move_base', MoveBaseAction, self._execute)
         self.tf_buffer = tf2_ros.Buffer()
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
@@ -227,6 +228,9 @@ class MoveBaseNode(Hooks):
         with self.output_lock:              # on_frozen closes under this lock: nothing goes out after it
             if self._may_output():
                 publisher.publish(msg)
+                if publisher is self.cmd_pub and self.activated_at is not None:
+                    since, self.activated_at = time.monotonic() - self.activated_at, None
+                    rospy.loginfo(f'move_base: first velocity command {1000 * since:.0f} ms after becoming active')
 
     def _conclude(self, terminal, **kwargs) -> bool:
         """Give the current goal a terminal status (``terminal`` is a SimpleActionServer setter), unless this
@@ -319,6 +323,7 @@ class MoveBaseNode(Hooks):
         return msg
 
     def on_active(self) -> None:
+        self.activated_at = time.monotonic()       # the first velocity command after it is logged (_out)
         if not self.outputs_open:
             threading.Thread(target=self._open_outputs, name='open_outputs', daemon=True).start()
 

@@ -18,7 +18,8 @@ manager (``~migration/role`` empty or absent: every single-master and fixed-plac
 - dormant (``sleep``, a frozen instance the manager keeps on its host instead of stopping it, for modules that
   implement ``on_sleep``): inputs closed too, no requests, nothing but its status; ``wake`` makes it a standby
   again (``on_wake``), which the next migration to this host promotes instead of starting a clone;
-- the active instance publishes its state every ``replicate_period`` on ``/migration/<module>/state``.
+- the active instance publishes its state every ``replicate_period`` on ``/migration/<module>/state``
+  (``replicate_period_authority`` on the manager's host).
 
 Topics and services (``<m>`` the module, ``<h>`` this host): ``/migration/<m>/renew`` (out),
 ``/migration/<m>/lease`` (in), ``/migration/<m>/state`` (out, while active), ``/migration/<m>/<h>/status``
@@ -146,6 +147,9 @@ class ManagedInstance:
             raise section.error('host', f'must be one of {", ".join(self.cfg.hosts)}, got {self.host!r}')
         self.id = instance_id(module, self.host)
         self.holder = Holder(module, self.id)
+        # on the manager's host a freeze never crosses the link: replicas there only cover a crash or a hang
+        self.replicate_period = (self.cfg.replicate_period_authority if self.host == self.cfg.authority
+                                 else self.cfg.replicate_period)
         self.elevator = Elevator(self.cfg.control_nice, rospy.logwarn)   # the protocol's threads (core.priority)
         self.state_seq = 0
         self.renew_pub = rospy.Publisher(topic(module, 'renew'), MigrationRenew, queue_size=10)
@@ -357,7 +361,7 @@ class ManagedInstance:
                     rospy.signal_shutdown('superseded by a newer term')
                     return
                 if active and now >= next_state:
-                    next_state = now + cfg.replicate_period
+                    next_state = now + self.replicate_period
                     self._publish_state()
                 if role != last_role or now >= next_status:
                     last_role = role

@@ -2,7 +2,8 @@
 
 Records every message of the given topics with its arrival time (wall clock, this host) and the instance that
 published it (the ``cnr_instance`` connection header; '-' for an unmanaged publisher), and optionally calls
-``/global_goal_manager/next_goal`` at a fixed rate (the global goal manager has no periodic output of its own),
+``/global_goal_manager/next_goal`` at a fixed rate over a persistent connection, found anew after a failed or
+refused request (the global goal manager has no periodic output of its own),
 recording each answer at the time its request was sent (a request sent then was served), and move_base's goal
 results (``/move_base/result``: ok = succeeded, the final status code in the instance column). For the modules in
 ``~status_modules`` it also records when each instance closed its outputs for good (topic ``frozen``: the
@@ -18,7 +19,7 @@ from __future__ import annotations
 import struct
 import threading
 import time
-from typing import Dict
+from typing import Dict, Optional
 
 import rospy
 from actionlib_msgs.msg import GoalStatus
@@ -57,7 +58,7 @@ class Probe:
         for m in modules:
             for h in hosts:
                 rospy.Subscriber(f'/migration/{m}/{h}/status', InstanceStatus, self._on_status, queue_size=20)
-        self.next_goal = rospy.ServiceProxy('/global_goal_manager/next_goal', NextGoal)
+        self.next_goal: Optional[rospy.ServiceProxy] = None     # persistent; found anew after a failed call
         self.last_instance = ''
 
     def _write(self, topic: str, instance: str, ok: bool, at: float = 0.0, stamp: str = '') -> None:
@@ -88,6 +89,21 @@ class Probe:
     def _on_result(self, msg: MoveBaseActionResult) -> None:
         self._write('/move_base/result', str(msg.status.status), msg.status.status == GoalStatus.SUCCEEDED)
 
+    def _call_next_goal(self) -> bool:
+        """One request over a persistent connection. After an error, a timeout or a refusal (the instance asked
+        is no longer active) the connection is closed and the next request looks the service up again, so it
+        reaches whichever instance holds the name then. (A new connection per request — a lookup on the master,
+        a TCP connection and a thread in the served node, 20 times a second — loaded the robot the bench
+        measures.)"""
+        if self.next_goal is None:
+            self.next_goal = rospy.ServiceProxy('/global_goal_manager/next_goal', NextGoal, persistent=True)
+        done, res = call_with_timeout(self.next_goal, 1.0, 0.0, 0.0)
+        ok = bool(done and res.success)
+        if not ok:
+            proxy, self.next_goal = self.next_goal, None
+            proxy.close()
+        return ok
+
     def spin(self) -> None:
         if self.rate <= 0:
             rospy.spin()
@@ -96,9 +112,7 @@ class Probe:
         next_call = time.monotonic()
         while not rospy.core.is_shutdown_requested():
             sent = time.time()
-            done, res = call_with_timeout(self.next_goal, 1.0, 0.0, 0.0)
-            ok = done and res.success
-            self._write('next_goal', '', ok, sent)
+            self._write('next_goal', '', self._call_next_goal(), sent)
             next_call = max(next_call + period, time.monotonic())
             time.sleep(max(0.0, next_call - time.monotonic()))
 

@@ -32,6 +32,7 @@ class MigrationConfig:
     timeouts: Timeouts
     control_call: float
     replicate_period: float
+    replicate_period_authority: float     # an active instance on the authority's host
     status_period: float
     failover: bool
     hot_standby: Tuple[str, ...]
@@ -99,6 +100,7 @@ def from_section(s: Section) -> MigrationConfig:
         hosts=hosts, authority=authority, modules=modules, lease=ls, timeouts=timeouts,
         control_call=t.number('control_call', positive=True),
         replicate_period=s.number('replicate_period', positive=True),
+        replicate_period_authority=s.number('replicate_period_authority', positive=True),
         status_period=s.number('status_period', positive=True),
         failover=s.boolean('failover'), hot_standby=_names(s, 'hot_standby', modules),
         dormant=_dormant(s, modules, hosts),
