@@ -4,6 +4,7 @@ handed over on promotion and returned on freeze, silent once cut off. global_goa
 modules' instances have tests of their own."""
 import math
 import os
+import time
 
 import pytest
 
@@ -23,15 +24,17 @@ def cell_states():
 
 
 @pytest.fixture
-def gg(ros, workspace):
+def gg(ros, workspace, request):
+    """The managed global_goal_manager on the robot (or the host given as the fixture's indirect parameter)."""
     from cnr_msgs.msg import CellStates
     from migration_driver import LeaseDriver, managed_params
+    host = getattr(request, 'param', 'robot')
     ros.master.call('setParam', '/global_goal_manager', {
         'frame_id': 'map', 'global_goal_manager': {'policy': 'coverage_sweep'},
-        'migration': managed_params(workspace, 'robot')})
+        'migration': managed_params(workspace, host)})
     pub = rospy.Publisher('/cell_states', CellStates, queue_size=1, latch=True)
     pub.publish(cell_states())
-    driver = LeaseDriver('global_goal_manager', 'robot')
+    driver = LeaseDriver('global_goal_manager', host)
     proc = ros.master.run(['rosrun', 'global_goal_manager', 'global_goal_manager'], 'gg_managed')
     yield proc, driver
     ros.master.stop_child(proc)
@@ -125,3 +128,31 @@ def test_an_instance_that_became_active_asks_the_bridge_to_poll_after_registerin
         assert calls == [True]
     finally:
         service.shutdown()
+
+
+@pytest.mark.parametrize('gg', ['robot', 'cloud'], indirect=True)
+def test_an_active_instance_replicates_less_often_on_the_authoritys_host(gg, workspace):
+    """config/migration.yaml: the active instance publishes its state every replicate_period on the cloud, and
+    every replicate_period_authority on the robot (the manager's host: a freeze reaches it without the link)."""
+    from cnr_msgs.msg import ModuleState
+    from cnr_params import load_yaml
+    cfg = load_yaml(os.path.join(workspace, 'config', 'migration.yaml'))
+    proc, driver = gg
+    arrivals = []
+    sub = rospy.Subscriber('/migration/global_goal_manager/state', ModuleState,
+                           lambda m: arrivals.append(time.monotonic()), queue_size=50)
+    try:
+        driver.wait_standby(30)
+        driver.promote({'policy': 'coverage_sweep', 'policy_state': {'waypoint_index': 0}, 'last_goal': None})
+        driver.wait_active(10)
+        if driver.host == cfg['authority']:
+            period = cfg['replicate_period_authority']
+            wait_until(lambda: len(arrivals) >= 2, 3 * period, 'two replicas on the robot')
+            assert arrivals[1] - arrivals[0] >= 0.8 * period, arrivals
+        else:
+            period = cfg['replicate_period']
+            wait_until(lambda: len(arrivals) >= 4, 10 * period, 'four replicas on the cloud')
+            gaps = [b - a for a, b in zip(arrivals, arrivals[1:4])]
+            assert max(gaps) < 2 * period, gaps
+    finally:
+        sub.unregister()
