@@ -49,11 +49,18 @@ PKGS=(
   iproute2 iputils-ping iperf3 procps
 )
 
+missing=()
+for p in "${PKGS[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ "$install" = 0 ] && [ "${#missing[@]}" -gt 0 ]; then
+  # the scripts other than the README's two commands call setup.sh --no-install: say what to do, not
+  # "catkin_make: command not found"
+  echo "setup.sh: ${#missing[@]} Debian package(s) the workspace needs are missing (${missing[*]:0:5} ...):" \
+       "run launch_scripts/setup.sh once as root to install them" >&2
+  exit 1
+fi
 if [ "$install" = 1 ]; then
-  missing=()
-  for p in "${PKGS[@]}"; do
-    dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
-  done
   if [ "${#missing[@]}" -gt 0 ]; then
     echo "setup.sh: installing ${#missing[@]} missing Debian package(s): ${missing[*]}"
     if [ "$(id -u)" != 0 ]; then
