@@ -22,6 +22,8 @@ from cnr_harness import wait_until
 rospy = pytest.importorskip('rospy')
 
 HEATER_CELL = 19            # col 8, row 1 in config/scenarios/corridor.yaml
+GOAL_TIMEOUT = 60.0         # s of sim time (config/mfg.yaml: 120): a corridor goal takes < 40 s; B is promoted only
+                            # after A's check goal has used up this time (a hand-over longer than the goal's time)
 
 
 @pytest.fixture(scope='module')
@@ -42,6 +44,7 @@ def mfg_params(ros, workspace):
     from migration_driver import managed_params
     mfg = dict(load_yaml(os.path.join(workspace, 'config', 'mfg.yaml'))['mfg'])
     mfg.update(load_yaml(os.path.join(workspace, 'config', 'scenarios', 'corridor.yaml'))['mfg'])
+    mfg['goal_timeout'] = GOAL_TIMEOUT
     ros.master.call('setParam', '/mfg', {'mfg': mfg, 'migration': managed_params(workspace, 'robot')})
     yield
     ros.master.call('deleteParam', '/mfg')
@@ -175,6 +178,9 @@ def test_three_instances_hand_over_a_search_and_a_patrol_goal(mission, mfg_param
 
         # -- B: takes A's search over and completes it ---------------------------------------------------
         b = start('mfg_b')
+        # the hand-over outlasts the goal's goal_timeout (counted from A's send): B still drives it and measures
+        wait_until(lambda: now() > frozen['goal']['sent'] + GOAL_TIMEOUT + 1.0, 60,
+                   "the handed-over goal's goal_timeout to pass")
         t = now()
         driver.promote(frozen)
         driver.wait_active(10)
@@ -192,6 +198,9 @@ def test_three_instances_hand_over_a_search_and_a_patrol_goal(mission, mfg_param
         hotspot = wait_until(lambda: rec.since('hotspot', t), 300, 'B: the hotspot', b)[0]
         assert hotspot.cell_index == HEATER_CELL
         t_hot = now()
+        # B cancelled nothing: the handed-over check goal was not cut short by A's goal_timeout
+        assert not rec.since('cancel', t), rec.since('cancel', t)
+        assert not [m for m in rec.since('state', t) if 'unreachable' in m.message]
         # back to the global goals; freeze B while it drives to one
         def patrol_goal():
             goals = rec.since('goal', t_hot)

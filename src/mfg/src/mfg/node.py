@@ -219,7 +219,9 @@ class MfgNode(Hooks):
             self.client.send_goal(target)
         if not self._output(epoch, send):
             return 'stopped'
-        deadline = goal.sent + self.p.goal_timeout
+        # the timeout counts from this instance's send: a goal handed over (sent earlier by another instance)
+        # gets its whole goal_timeout again, so a hand-over, however long it took, never cancels it at once
+        deadline = max(goal.sent, rospy.Time.now().to_sec()) + self.p.goal_timeout
         while self._live(epoch):
             if self.client.wait_for_result(rospy.Duration(0.1)):
                 return 'succeeded' if self.client.get_state() == GoalStatus.SUCCEEDED else 'failed'
