@@ -87,16 +87,20 @@ class LeaseDriver:
         rospy.wait_for_service(f'/migration/{self.module}/{host or self.host}/control', timeout)
         return self.wait_role('standby', timeout, host)
 
-    def promote(self, state: Optional[Dict[str, Any]] = None, host: str = '', pregrant: bool = False) -> int:
+    def promote(self, state: Optional[Dict[str, Any]] = None, host: str = '', pregrant: bool = False,
+                data: Optional[bytes] = None, base_instance: str = '') -> int:
         """Promote (with ``pregrant``: the order carries the lease for the instance's newest standby request, as
-        the manager does; the instance must then answer that it is active)."""
+        the manager does; the instance must then answer that it is active). ``data``: the state as sent (e.g. a
+        patch to a replica of ``base_instance``) instead of ``state``."""
         host = host or self.host
         with self.lock:
             term = self.grantor.promote(instance_id(self.module, host), time.monotonic())
             nonce, duration = (self.grantor.pregrant(instance_id(self.module, host), time.monotonic())
                                if pregrant else (0, 0.0))
-        data = codec.encode(self.module, state) if state is not None else b''
-        res = self.controls[host](command='promote', term=term, state=data, nonce=nonce, duration=duration)
+        if data is None:
+            data = codec.encode(self.module, state) if state is not None else b''
+        res = self.controls[host](command='promote', term=term, state=data, nonce=nonce, duration=duration,
+                                  base_instance=base_instance)
         assert res.ok, res.message
         assert res.active or not nonce, f'pre-granted promotion to term {term} but not active'
         self.last_promotion_active = res.active
@@ -106,12 +110,16 @@ class LeaseDriver:
         return self.wait_role('active', timeout, host)
 
     def freeze(self, host: str = '') -> Dict[str, Any]:
+        return codec.decode(self.module, self.freeze_data(host))
+
+    def freeze_data(self, host: str = '', base_seq: int = 0) -> bytes:
+        """Freeze; the final state as sent: a patch to replica ``base_seq`` if the instance still has it."""
         host = host or self.host
-        res = self.controls[host](command='freeze', term=self.grantor.term)
+        res = self.controls[host](command='freeze', term=self.grantor.term, base_seq=base_seq)
         assert res.ok, res.message
         with self.lock:
             self.grantor.release(instance_id(self.module, host), self.grantor.term)
-        return codec.decode(self.module, res.state)
+        return bytes(res.state)
 
     def state(self, host: str = '') -> Dict[str, Any]:
         res = self.controls[host or self.host](command='state')

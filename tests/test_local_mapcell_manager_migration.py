@@ -147,11 +147,42 @@ def lmm(ros, workspace, tmp_path):
         ros.master.call('deleteParam', f'/{names[host]}')
 
 
+class Replicas:
+    """The test's copy of the active instance's replica stream (as the manager keeps it)."""
+
+    def __init__(self):
+        import threading
+        from cnr_msgs.msg import ModuleState
+        from migration_manager.core import state as codec
+        self.lock = threading.Lock()
+        self.replica = codec.Replica(MODULE)
+        self.messages = []
+        self.sub = rospy.Subscriber(f'/migration/{MODULE}/state', ModuleState, self._on, queue_size=20)
+
+    def _on(self, msg):
+        with self.lock:
+            self.messages.append((msg.instance, msg.seq, msg.base_seq, len(msg.data)))
+            self.replica.take(msg.instance, msg.seq, msg.base_seq, bytes(msg.data))
+
+    def seq_of(self, instance):
+        with self.lock:
+            return self.replica.seq_of(instance)
+
+    def resolve(self, instance, data):
+        with self.lock:
+            return self.replica.resolve(instance, data)
+
+
 def test_hand_over_between_two_instances_stores_every_measurement_exactly_once(lmm, ros):
+    """... with the final state as a patch: A replicates (a whole state when asked, patches between), B (a
+    standby) keeps the replicas, A's freeze answers with a patch to the newest one, and B resolves it."""
     from cnr_maps.measurements import read_tsv
     from cnr_msgs.srv import InstanceControl
     from migration_manager.core import state as codec
+    from migration_manager.core.lease import instance_id
     start, driver, stream, tmp = lmm
+    a_id = instance_id(MODULE, 'robot')
+    replicas = Replicas()
 
     # A: a standby buffers (stores, publishes and serves nothing), then is promoted without a state
     proc_a = start('robot')
@@ -174,16 +205,34 @@ def test_hand_over_between_two_instances_stores_every_measurement_exactly_once(l
     stream.start()
     stream.wait_sent(40)
 
-    state = driver.freeze(host='robot')
+    # a whole replica (as the manager asks for one when it holds none; B, a standby, asks A too), then at
+    # least one patch to it, every replica_period_authority (A is on the robot)
+    wait_until(lambda: f'/{MODULE}_b' in [n for t, ns in ros.master.call('getSystemState')[1]
+                                           if t == f'/migration/{MODULE}/state' for n in ns], 10,
+               "B subscribed to A's replicas")
+    assert rospy.ServiceProxy(f'/migration/{MODULE}/robot/control', InstanceControl)(command='keyframe').ok
+    base = wait_until(lambda: replicas.seq_of(a_id), 10, 'a whole replica of A')
+    wait_until(lambda: replicas.seq_of(a_id) > base, 15, 'a patch to it')
+    base = replicas.seq_of(a_id)
+    stream.wait_sent(len(stream.sent) + 10)
+    data = driver.freeze_data(host='robot', base_seq=base)
     frozen_at = len(stream.sent)
+    assert codec.decode_any(MODULE, data)[0] == base               # a patch to the replica held
+    state = replicas.resolve(a_id, data)
+    assert len(data) * 3 < len(codec.encode(MODULE, state)), (len(data), len(codec.encode(MODULE, state)))
+    patches = [n for i, seq, b, n in replicas.messages if i == a_id and b]
+    wholes = [n for i, seq, b, n in replicas.messages if i == a_id and not b]
+    assert patches and wholes and max(patches) < min(wholes), replicas.messages
     stream.wait_sent(frozen_at + 15)                               # only B receives these
     wrong = dict(state, grid=dict(state['grid'], cols=12))         # a state that does not fit is refused
     res = control_b(command='promote', term=99, state=codec.encode(MODULE, wrong))
     assert not res.ok and 'grid' in res.message, res.message
+    res = control_b(command='promote', term=99, state=data, base_instance=instance_id(MODULE, 'moon'))
+    assert not res.ok and res.message.startswith(codec.BASE_MISSING), res.message   # not its replica: refused
     assert read_tsv(str(tmp / 'cloud.tsv')) == [] and not served(ros, f'/{MODULE}_b')    # B stored nothing yet
     promoted_at = time.monotonic()
     promoted_after = len(stream.sent)
-    driver.promote(state, host='cloud')
+    driver.promote(host='cloud', data=data, base_instance=a_id)    # the patch: B holds its base
     driver.wait_active(10, host='cloud')
     stream.wait_sent(promoted_after + 30)
     stream.stop()
@@ -216,6 +265,7 @@ def test_hand_over_between_two_instances_stores_every_measurement_exactly_once(l
     assert proc_a.alive() and proc_b.alive()
     for proc in (proc_a, proc_b):
         assert 'Traceback' not in proc.output(), proc.output()[-3000:]
+    replicas.sub.unregister()
 
 
 def test_a_lapsed_lease_holds_the_output_back_and_the_service_refuses(lmm, ros):

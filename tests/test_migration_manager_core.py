@@ -302,6 +302,76 @@ def test_state_round_trip_and_foreign_state():
         codec.decode('mfg', b'garbage')
 
 
+
+def _store(n):
+    """A local_mapcell_manager-like state: columns that grow, bookkeeping that changes."""
+    return {'grid': {'cols': 10, 'rows': 3}, 'measurements': {'time': [float(i) for i in range(n)],
+                                                              'cell': [i % 30 for i in range(n)]},
+            'newest': {'time': float(n - 1), 'keys': [[n - 1, 1]]}, 'unpublished': [n - 1], 'duplicates': n // 7}
+
+
+def test_a_patch_turns_its_base_into_the_new_state_and_holds_only_what_changed():
+    import random
+    base, new = _store(3000), _store(3012)
+    new['grid']['extra'] = [1, 2]                        # a key added
+    del new['duplicates']                               # a key removed
+    new['unpublished'] = [5]                            # a list that did not only grow
+    p = codec.diff(base, new)
+    assert codec.patch(base, p) == new
+    assert p['{']['measurements']['{']['time'] == {'+': [float(i) for i in range(3000, 3012)]}
+    assert 'grid' in p['{'] and 'cols' not in p['{']['grid']['{'] and p['-'] == ['duplicates']
+    assert codec.patch(new, codec.diff(new, base)) == base            # and back (the lists shrink: replaced)
+    assert base == _store(3000)                                       # the base is not changed
+    whole, delta = codec.encode('local_mapcell_manager', new), codec.encode_patch('local_mapcell_manager', 7, p)
+    assert len(delta) * 20 < len(whole)
+    assert codec.decode_any('local_mapcell_manager', delta) == (7, p)
+    with pytest.raises(codec.BaseMissing, match=codec.BASE_MISSING):
+        codec.decode('local_mapcell_manager', delta)                  # a patch alone is not a state
+    rng = random.Random(3)                                            # random JSON values, both ways
+    def value(depth):
+        kind = rng.randrange(5) if depth < 3 else 0
+        if kind == 0:
+            return rng.choice([None, True, rng.random(), rng.randrange(9), 'x'])
+        if kind in (1, 3):
+            return [value(depth + 1) for _ in range(rng.randrange(4))]
+        return {str(rng.randrange(5)): value(depth + 1) for _ in range(rng.randrange(4))}
+    for _ in range(300):
+        a, b = value(0), value(0)
+        if rng.random() < 0.3 and isinstance(a, list):
+            b = a + [value(2)]
+        assert codec.patch(a, codec.diff(a, b)) == b
+    with pytest.raises(codec.StateError, match=r'state\.k: appends to a dict'):
+        codec.patch({'k': {}}, {'{': {'k': {'+': [1]}}})
+
+
+def test_replicas_are_patches_between_keyframes_and_a_receiver_that_missed_one_waits_for_the_next():
+    src = codec.Replicator('local_mapcell_manager', keyframe_every=3)
+    rx, late = codec.Replica('local_mapcell_manager'), codec.Replica('local_mapcell_manager')
+    msgs = [src.next(_store(n)) for n in (10, 11, 12, 13, 14, 15)]
+    assert [(seq, base) for seq, base, _ in msgs] == [(1, 0), (2, 1), (3, 2), (4, 0), (5, 4), (6, 5)]
+    for i, (seq, base, data) in enumerate(msgs):
+        assert rx.take('lmm@cloud', seq, base, data)
+        assert rx.state == _store(10 + i) and rx.seq_of('lmm@cloud') == seq and rx.seq_of('lmm@robot') == 0
+        if i >= 1:                                     # joined after the first keyframe: waits for the next
+            assert late.take('lmm@cloud', seq, base, data) == (i >= 3)
+    assert late.state == _store(15)
+    # a freeze: the final state as a patch to the replica the receiver holds, resolved by it
+    final = src.final(_store(17), base_seq=6)
+    assert codec.decode_any('local_mapcell_manager', final)[0] == 6
+    assert rx.resolve('lmm@cloud', final) == _store(17)
+    with pytest.raises(codec.BaseMissing):
+        rx.resolve('lmm@robot', final)                 # another instance's replica 6 is not this one
+    assert rx.resolve('lmm@cloud', src.final(_store(17), base_seq=5)) == _store(17)   # one behind: still held
+    assert codec.decode_any('local_mapcell_manager', src.final(_store(17), base_seq=1))[0] == 0   # not kept
+    assert codec.decode_any('local_mapcell_manager', src.final(_store(17), base_seq=0))[0] == 0
+    src.want_keyframe = True                           # a new standby asked for a base
+    assert src.next(_store(18))[1] == 0
+    rx.reset()
+    with pytest.raises(codec.BaseMissing):
+        rx.resolve('lmm@cloud', src.final(_store(19), base_seq=7))
+    with pytest.raises(codec.StateError, match='says base'):
+        rx.take('lmm@cloud', 9, 3, codec.encode('local_mapcell_manager', _store(1)))
+
 def test_config_from_the_workspace_and_errors_name_the_field(workspace):
     data = load_yaml(os.path.join(workspace, 'config', 'migration.yaml'))
     cfg = from_section(Section(data, 'config/migration.yaml'))
@@ -322,6 +392,9 @@ def test_config_from_the_workspace_and_errors_name_the_field(workspace):
     missing = {k: v for k, v in data.items() if k != 'replicate_period_authority'}
     with pytest.raises(ConfigError, match='replicate_period_authority'):
         from_section(Section(missing, 'config/migration.yaml'))
+    assert cfg.replicate_keyframe_every >= 1
+    with pytest.raises(ConfigError, match='replicate_keyframe_every'):
+        from_section(Section(dict(data, replicate_keyframe_every=0), 'config/migration.yaml'))
     bad = dict(data, control_nice=-21)
     with pytest.raises(ConfigError, match='control_nice'):
         from_section(Section(bad, 'config/migration.yaml'))

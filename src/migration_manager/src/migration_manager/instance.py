@@ -19,7 +19,11 @@ manager (``~migration/role`` empty or absent: every single-master and fixed-plac
   implement ``on_sleep``): inputs closed too, no requests, nothing but its status; ``wake`` makes it a standby
   again (``on_wake``), which the next migration to this host promotes instead of starting a clone;
 - the active instance publishes its state every ``replicate_period`` on ``/migration/<module>/state``
-  (``replicate_period_authority`` on the manager's host).
+  (``replicate_period_authority`` on the manager's host): a whole state every ``replicate_keyframe_every``
+  replicas, patches to the one before between them (:mod:`migration_manager.core.state`); a standby keeps the
+  newest replicas and asks the active instance for a whole state (``keyframe``) when it holds none, so that a
+  promotion can bring a patch to one of them instead of the whole state; a freeze answers with a patch to the
+  replica the manager says it holds.
 
 Topics and services (``<m>`` the module, ``<h>`` this host): ``/migration/<m>/renew`` (out),
 ``/migration/<m>/lease`` (in), ``/migration/<m>/state`` (out, while active), ``/migration/<m>/<h>/status``
@@ -36,11 +40,11 @@ import rospy
 
 from cnr_msgs.msg import InstanceStatus, MigrationLease, MigrationRenew, ModuleState
 from cnr_msgs.srv import InstanceControl, InstanceControlResponse
-from cnr_params.ros import distinct_callerid, private_section
+from cnr_params.ros import call_with_timeout, distinct_callerid, private_section
 from std_srvs.srv import Empty
 from migration_manager.core import state as state_codec
 from migration_manager.core.config import MigrationConfig, from_section
-from migration_manager.core.lease import Answer, Holder, instance_id
+from migration_manager.core.lease import Answer, Holder, host_of, instance_id
 from migration_manager.core.priority import Elevator
 
 INSTANCE_HEADER = 'cnr_instance'       # connection header of a managed instance's output publishers
@@ -50,6 +54,8 @@ class Hooks:
     """What the node provides. ``get_state``/``set_state`` are the module's documented state interface."""
 
     def get_state(self) -> Dict[str, Any]:
+        """A JSON-able snapshot, built afresh: the replicas are patches to the previous snapshot, so it must not
+        share anything the node changes later."""
         raise NotImplementedError
 
     def set_state(self, state: Dict[str, Any]) -> None:
@@ -151,12 +157,17 @@ class ManagedInstance:
         self.replicate_period = (self.cfg.replicate_period_authority if self.host == self.cfg.authority
                                  else self.cfg.replicate_period)
         self.elevator = Elevator(self.cfg.control_nice, rospy.logwarn)   # the protocol's threads (core.priority)
-        self.state_seq = 0
+        self.replicator = state_codec.Replicator(module, self.cfg.replicate_keyframe_every)
+        self.keyframe_now = False              # a standby asked for a whole state: the next replica, at once
+        self.replica = state_codec.Replica(module)     # the active instance's newest replicas (as a standby)
+        self.replica_lock = threading.Lock()
+        self.keyframe_asked = -1e9             # monotonic time of this standby's last keyframe request
         self.renew_pub = rospy.Publisher(topic(module, 'renew'), MigrationRenew, queue_size=10)
         self.state_pub = rospy.Publisher(topic(module, 'state'), ModuleState, queue_size=2)
         self.status_pub = rospy.Publisher(topic(module, f'{self.host}/status'), InstanceStatus, queue_size=5,
                                           latch=True)
         rospy.Subscriber(topic(module, 'lease'), MigrationLease, self._on_lease, queue_size=20)
+        rospy.Subscriber(topic(module, 'state'), ModuleState, self._on_replica, queue_size=5)
         rospy.Service(topic(module, f'{self.host}/control'), InstanceControl, self._on_control)
         threading.Thread(target=self._loop, name='migration-instance', daemon=True).start()
 
@@ -228,13 +239,18 @@ class ManagedInstance:
                                                        message=f'not at term {req.term}')
                     self.frozen = True
                     self.frozen_wall = time.time()
-                    data = self._state_bytes()
+                    data = self.replicator.final(self.hooks.get_state(), req.base_seq)
                 self.message = f'frozen at term {req.term}'
                 self.hooks.on_frozen()
                 self._status()
                 threading.Thread(target=self.hooks.after_frozen, name='after-frozen', daemon=True).start()
                 rospy.loginfo(f'{self.id}: frozen (term {req.term}); state {len(data)} bytes handed over')
                 return InstanceControlResponse(ok=True, message=self.message, term=req.term, state=data)
+            if req.command == 'keyframe':
+                with self.lock:
+                    self.replicator.want_keyframe = self.keyframe_now = True
+                self.wake.set()
+                return InstanceControlResponse(ok=True, message='a whole state next', term=self.holder.term)
             if req.command in ('sleep', 'wake'):
                 return self._sleep_or_wake(req.command)
             if req.command == 'promote':
@@ -245,7 +261,10 @@ class ManagedInstance:
                     again = (req.term == self.holder.term and not self.frozen and not self.holder.superseded)
                     if not again:
                         if req.state:
-                            self.hooks.set_state(state_codec.decode(self.module, req.state))
+                            with self.replica_lock:       # a patch to a replica it holds: the whole state
+                                state = self.replica.resolve(req.base_instance, req.state)
+                                self.replica.reset()
+                            self.hooks.set_state(state)
                         self.holder.promoted(req.term, req.nonce, req.duration)
                         self.frozen = False
                         self.was_active = False       # reported as "active" anew, not a lapse
@@ -360,9 +379,12 @@ class ManagedInstance:
                     self._status()
                     rospy.signal_shutdown('superseded by a newer term')
                     return
-                if active and now >= next_state:
+                if active and (now >= next_state or self.keyframe_now):
                     next_state = now + self.replicate_period
+                    self.keyframe_now = False
                     self._publish_state()
+                if standby:
+                    self._ask_keyframe(now)
                 if role != last_role or now >= next_status:
                     last_role = role
                     next_status = now + cfg.status_period
@@ -375,9 +397,42 @@ class ManagedInstance:
             self.wake.clear()
 
     def _publish_state(self) -> None:
-        self.state_seq += 1
-        msg = ModuleState(module=self.module, instance=self.id, term=self.holder.term, seq=self.state_seq,
-                          data=self._state_bytes())
+        seq, base, data = self.replicator.next(self.hooks.get_state())
+        msg = ModuleState(module=self.module, instance=self.id, term=self.holder.term, seq=seq, base_seq=base,
+                          data=data)
         msg.header.stamp = rospy.Time.from_sec(time.time())
         self.state_pub.publish(msg)
 
+
+    # ------------------------------------------------------------------ replicas (as a standby)
+    def _on_replica(self, msg: ModuleState) -> None:
+        if msg.instance == self.id:
+            return
+        with self.lock:
+            standby = self.holder.term == 0 and not self.frozen and not self.dormant
+        if not standby:
+            return
+        try:
+            with self.replica_lock:
+                self.replica.take(msg.instance, msg.seq, msg.base_seq, bytes(msg.data))
+        except state_codec.StateError as exc:
+            rospy.logwarn(f'{self.id}: replica {msg.seq} of {msg.instance} ignored: {exc}')
+
+    def _ask_keyframe(self, now: float) -> None:
+        """A standby that holds no replica of the current holder asks it for a whole state (at most once per
+        ``timeouts.control_call``; never waited on)."""
+        holder = self.holder.seen_holder
+        if not holder or now - self.keyframe_asked < self.cfg.control_call:
+            return
+        with self.replica_lock:
+            if self.replica.seq_of(holder):
+                return
+        self.keyframe_asked = now
+        name = topic(self.module, f'{host_of(holder)}/control')
+
+        def call() -> None:
+            ok, res = call_with_timeout(rospy.ServiceProxy(name, InstanceControl), self.cfg.control_call,
+                                        command='keyframe')
+            if not ok:
+                rospy.logdebug(f'{self.id}: keyframe request to {holder} failed: {res}')
+        threading.Thread(target=call, name='keyframe-request', daemon=True).start()

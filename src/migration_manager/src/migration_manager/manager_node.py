@@ -18,6 +18,7 @@ import cnr_params
 from cnr_msgs.msg import AgentHealth, InstanceStatus, MigrationEvent, MigrationLease, MigrationRenew, ModuleState, Placement
 from cnr_msgs.srv import AgentCommand, InstanceControl, Migrate, MigrateResponse
 from cnr_params.ros import call_with_timeout, init_node, private_section
+from migration_manager.core import state as state_codec
 from migration_manager.core.config import from_section
 from migration_manager.core.priority import Elevator
 from migration_manager.core.lease import Answer, Grantor, host_of, instance_id
@@ -70,12 +71,31 @@ class ModuleBook:
         self.module = module
         self.grantor = grantor
         self.migration: Optional[Migration] = None
-        self.replicated: Optional[bytes] = None       # newest state of the current holder
+        self.replica = state_codec.Replica(module)     # the current holder's newest replicas (its own lock:
+        self.replica_lock = threading.Lock()            # decoding a whole state is not done under the manager's)
         self.status: Dict[str, InstanceStatus] = {}    # host -> newest status
+        self.keyframe_asked = -1e9                      # monotonic time of the last keyframe request
         self.first_grant: Dict[int, float] = {}        # term -> monotonic time of its first granted renewal
 
     def host(self) -> str:
         return host_of(self.grantor.holder) if self.grantor.holder else ''
+
+    def replicated(self, instance: str) -> Optional[bytes]:
+        """The newest replica of ``instance`` as a patch that changes nothing (a few bytes: a target that holds
+        it resolves it; one that does not is sent the whole state, :meth:`whole`), or None without one."""
+        with self.replica_lock:
+            seq = self.replica.seq_of(instance)
+        return state_codec.encode_patch(self.module, seq, {'{': {}}) if seq else None
+
+    def whole(self, instance: str, data: bytes) -> Optional[bytes]:
+        """``data`` (a state or a patch to a replica of ``instance``) as the whole state, or None if the patch's
+        base is not held here either."""
+        try:
+            with self.replica_lock:
+                state = self.replica.resolve(instance, data)
+        except state_codec.StateError:
+            return None
+        return state_codec.encode(self.module, state)
 
 
 class Manager:
@@ -135,10 +155,31 @@ class Manager:
         if book is None:
             return
         with self.lock:
-            if msg.instance == book.grantor.holder and msg.term == book.grantor.term:
-                book.replicated = bytes(msg.data)
-                if book.migration is not None:
-                    book.migration.replicated = book.replicated
+            if msg.instance != book.grantor.holder or msg.term != book.grantor.term:
+                return
+        try:
+            with book.replica_lock:
+                held = book.replica.take(msg.instance, msg.seq, msg.base_seq, bytes(msg.data))
+        except state_codec.StateError as exc:
+            rospy.logwarn(f'{msg.module}: replica {msg.seq} of {msg.instance} ignored: {exc}')
+            return
+        if not held:
+            self._ask_keyframe(book, msg.instance)
+        with self.lock:
+            if book.migration is not None:
+                book.migration.replicated = book.replicated(msg.instance) or book.migration.replicated
+
+    def _ask_keyframe(self, book: ModuleBook, instance: str) -> None:
+        """A patch to a replica the manager does not hold (it started after the last whole one): ask for a whole
+        state (at most once per ``timeouts.control_call``; never waited on)."""
+        now = time.monotonic()
+        if now - book.keyframe_asked < self.cfg.control_call:
+            return
+        book.keyframe_asked = now
+        link = self.control.get((book.module, host_of(instance)))
+        if link is not None:
+            threading.Thread(target=link.call, kwargs=dict(command='keyframe'), name='keyframe-request',
+                             daemon=True).start()
 
     def _on_status(self, msg: InstanceStatus) -> None:
         book = self.books.get(msg.module)
@@ -185,7 +226,7 @@ class Manager:
                 raise ValueError(f'{module} is already migrating ({book.migration.source}->{book.migration.target})')
             m = Migration(module, book.host(), target, mode, self.cfg.timeouts, book.grantor, now,
                           failover=failover)
-            m.replicated = book.replicated
+            m.replicated = book.replicated(book.grantor.holder)
             book.migration = m
         self._publish_placement()
         seen = 0
@@ -268,7 +309,10 @@ class Manager:
             with self.lock:
                 return m.target_failed(time.monotonic(), f'agent on {host}: {res if not ok else res.message}')
         if verb == 'freeze':
-            ok, res = self.control[(m.module, host)].call(command='freeze', term=detail)
+            book = self.books[m.module]
+            with book.replica_lock:          # the final state comes as a patch to the replica held here
+                base = book.replica.seq_of(instance_id(m.module, host))
+            ok, res = self.control[(m.module, host)].call(command='freeze', term=detail, base_seq=base)
             with self.lock:
                 if ok and res.ok:
                     return m.frozen(time.monotonic(), bytes(res.state))
@@ -278,8 +322,17 @@ class Manager:
             book = self.books[m.module]
             with self.lock:                   # the lease for the target's newest standby request, granted now
                 nonce, duration = book.grantor.pregrant(instance_id(m.module, host), time.monotonic())
-            ok, res = self.control[(m.module, host)].call(command='promote', term=term, state=state or b'',
-                                                          nonce=nonce, duration=duration)
+            base = instance_id(m.module, m.source)         # whose replica a patched state refers to
+            link = self.control[(m.module, host)]
+            ok, res = link.call(command='promote', term=term, state=state or b'', base_instance=base,
+                                nonce=nonce, duration=duration)
+            if ok and not res.ok and res.message.startswith(state_codec.BASE_MISSING):
+                whole = book.whole(base, state)              # the target lacks the patch's base: the whole state
+                rospy.loginfo(f'{m.module}: {host} does not hold the replica the state is a patch to: sending the '
+                              f'whole state ({len(whole) if whole else 0} bytes)')
+                if whole is not None:
+                    ok, res = link.call(command='promote', term=term, state=whole, base_instance=base, nonce=nonce,
+                                        duration=duration)
             if ok and res.ok:
                 if res.active:                # active before it answered
                     with self.lock:

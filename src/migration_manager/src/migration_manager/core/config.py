@@ -33,6 +33,7 @@ class MigrationConfig:
     control_call: float
     replicate_period: float
     replicate_period_authority: float     # an active instance on the authority's host
+    replicate_keyframe_every: int         # replicas between whole states (the others are patches)
     status_period: float
     failover: bool
     hot_standby: Tuple[str, ...]
@@ -101,6 +102,7 @@ def from_section(s: Section) -> MigrationConfig:
         control_call=t.number('control_call', positive=True),
         replicate_period=s.number('replicate_period', positive=True),
         replicate_period_authority=s.number('replicate_period_authority', positive=True),
+        replicate_keyframe_every=s.integer('replicate_keyframe_every', minimum=1),
         status_period=s.number('status_period', positive=True),
         failover=s.boolean('failover'), hot_standby=_names(s, 'hot_standby', modules),
         dormant=_dormant(s, modules, hosts),
