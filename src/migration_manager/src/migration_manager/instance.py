@@ -263,8 +263,9 @@ class ManagedInstance:
                         if req.state:
                             with self.replica_lock:       # a patch to a replica it holds: the whole state
                                 state = self.replica.resolve(req.base_instance, req.state)
+                            self.hooks.set_state(state)   # (refused: nothing changed, the replicas kept)
+                            with self.replica_lock:       # the node may change what they share with it
                                 self.replica.reset()
-                            self.hooks.set_state(state)
                         self.holder.promoted(req.term, req.nonce, req.duration)
                         self.frozen = False
                         self.was_active = False       # reported as "active" anew, not a lapse
