@@ -167,7 +167,8 @@ class ManagedInstance:
         self.status_pub = rospy.Publisher(topic(module, f'{self.host}/status'), InstanceStatus, queue_size=5,
                                           latch=True)
         rospy.Subscriber(topic(module, 'lease'), MigrationLease, self._on_lease, queue_size=20)
-        rospy.Subscriber(topic(module, 'state'), ModuleState, self._on_replica, queue_size=5)
+        self.replica_sub: Optional[rospy.Subscriber] = None
+        self._follow_replicas(True)
         rospy.Service(topic(module, f'{self.host}/control'), InstanceControl, self._on_control)
         threading.Thread(target=self._loop, name='migration-instance', daemon=True).start()
 
@@ -270,6 +271,7 @@ class ManagedInstance:
                         self.frozen = False
                         self.was_active = False       # reported as "active" anew, not a lapse
                 if not again:
+                    self._follow_replicas(False)
                     self.message = f'promoted to term {req.term}'
                     rospy.loginfo(f'{self.id}: promoted to term {req.term}'
                                   f'{f" with a state of {len(req.state)} bytes" if req.state else ""}'
@@ -314,6 +316,7 @@ class ManagedInstance:
             else:
                 self.dormant = False
                 self.message = 'standby (woken)'
+                self._follow_replicas(True)
         rospy.loginfo(f'{self.id}: {self.message}')
         self._status()
         self.wake.set()
@@ -406,6 +409,17 @@ class ManagedInstance:
 
 
     # ------------------------------------------------------------------ replicas (as a standby)
+    def _follow_replicas(self, on: bool) -> None:
+        """Only a standby subscribes to the replicas: a subscriber on the other host is one more node its master
+        must notify of every change of the topic's publishers, and a master's notification to a host cut off
+        blocks one of its few notifier threads until TCP gives up (minutes)."""
+        if on and self.replica_sub is None:
+            self.replica_sub = rospy.Subscriber(topic(self.module, 'state'), ModuleState, self._on_replica,
+                                                queue_size=5)
+        elif not on and self.replica_sub is not None:
+            self.replica_sub.unregister()
+            self.replica_sub = None
+
     def _on_replica(self, msg: ModuleState) -> None:
         if msg.instance == self.id:
             return

@@ -157,6 +157,11 @@ class MasterClient:
         if not unregister and not register:
             return []
         multi = xmlrpc.client.MultiCall(self._proxy())
+        # a peer's subscribers and services go first: removing its publishers first made the master notify its
+        # subscribers of that, over a link that may be gone (a peer lost), and rosmaster's notifications have
+        # no timeout: each one to a host cut off holds one of its notifier threads for minutes, and local
+        # nodes' notifications then wait (a failover's new instance was not connected for 135 s)
+        unregister = sorted(unregister, key=lambda r: r.kind == 'pub')
         for r in unregister:
             if r.kind == 'pub':
                 multi.unregisterPublisher(r.caller_id, r.name, r.caller_api)
