@@ -94,7 +94,8 @@ def test_store_and_forward_across_outages(tmp_path):
                                       os.path.join(WS, 'config', 'trace_outages.tsv'),
                                       scenario=corridor(tmp_path, 110.0))      # ends after the four outages
     assert status in (0, 3), out[-3000:]         # the hotspot is not the point here (the MFG is on the cloud)
-    sf = s['store_and_forward']
+    sf = s['store_and_forward']                  # the sender's status that showed the queue drained
+    assert sf['status_at'] == 'drain', sf
     assert sf['queued'] == 0 and sf['acked_seq'] == sf['last_seq'] == sf['appended'] > 100, sf
     assert sf['resent'] > 0 and not sf['full'] and sf['rejected'] == 0, sf    # the outages cost resends only
     assert 'store-and-forward drained' in out

@@ -49,6 +49,7 @@ class MissionMonitor:
         relay_topic = p.string('relay_status_topic')           # '' when no store-and-forward stream runs
         self.relay_drain_timeout = p.number('relay_drain_timeout', nonnegative=True)
         self.relay: Optional[StoreForwardStatus] = None
+        self.relay_drained: Optional[StoreForwardStatus] = None     # the status that showed the queue empty
         if relay_topic:
             rospy.Subscriber(relay_topic, StoreForwardStatus, lambda m: setattr(self, 'relay', m), queue_size=2)
         self.relay_expected = bool(relay_topic)
@@ -257,6 +258,7 @@ class MissionMonitor:
         while not rospy.is_shutdown() and time.monotonic() < deadline:
             r = self.relay
             if r is not None and r.queued == 0 and r.acked_seq == r.last_seq:
+                self.relay_drained = r
                 self._say(f'store-and-forward drained: {r.appended} stored, all acknowledged')
                 return
             time.sleep(0.2)
@@ -312,6 +314,7 @@ class MissionMonitor:
         b0, b1 = self.battery_first, self.battery_last
         now = rospy.Time.now().to_sec()
         status, t_task, b_task = self.task_measures(found)
+        relay = self.relay_drained or self.relay
         summary = dict(
             scenario=self.name, placement=self.placement, found=found,
             task=dict(mission_status=status, t_task=t_task, b_task=None if math.isnan(b_task) else b_task),
@@ -336,9 +339,12 @@ class MissionMonitor:
                 task=self.decision_task, decisions_tsv='decisions.tsv', evaluation=self.evaluation,
                 decisions=[{k: d[k] for k in ('time', 'event', 'decision', 'reason', 'c_l', 'r_bw', 'placement')}
                            for d in decisions]),
-            store_and_forward=None if self.relay is None else {
-                k: getattr(self.relay, k) for k in ('stream', 'epoch', 'last_seq', 'acked_seq', 'queued', 'appended',
-                                                    'sent', 'resent', 'timeouts', 'full', 'rejected')},
+            # the sender's status when the drain was confirmed (the robot goes on measuring until it is shut
+            # down: a later status may hold one more, not yet acknowledged), else the last one
+            store_and_forward=None if relay is None else dict({
+                k: getattr(relay, k) for k in ('stream', 'epoch', 'last_seq', 'acked_seq', 'queued', 'appended',
+                                               'sent', 'resent', 'timeouts', 'full', 'rejected')},
+                status_at='drain' if relay is self.relay_drained else 'end'),
             network_profile=None if not profiles else dict(
                 file='network_profile.tsv', samples=len(profiles),
                 alive_fraction=sum(r[1] for r in profiles) / len(profiles)),
