@@ -158,7 +158,6 @@ class ManagedInstance:
                                  else self.cfg.replicate_period)
         self.elevator = Elevator(self.cfg.control_nice, rospy.logwarn)   # the protocol's threads (core.priority)
         self.replicator = state_codec.Replicator(module, self.cfg.replicate_keyframe_every)
-        self.keyframe_now = False              # a standby asked for a whole state: the next replica, at once
         self.replica = state_codec.Replica(module)     # the active instance's newest replicas (as a standby)
         self.replica_lock = threading.Lock()
         self.keyframe_asked = -1e9             # monotonic time of this standby's last keyframe request
@@ -249,7 +248,7 @@ class ManagedInstance:
                 return InstanceControlResponse(ok=True, message=self.message, term=req.term, state=data)
             if req.command == 'keyframe':
                 with self.lock:
-                    self.replicator.want_keyframe = self.keyframe_now = True
+                    self.replicator.want_keyframe = True      # the next replica, whole and at once
                 self.wake.set()
                 return InstanceControlResponse(ok=True, message='a whole state next', term=self.holder.term)
             if req.command in ('sleep', 'wake'):
@@ -383,9 +382,8 @@ class ManagedInstance:
                     self._status()
                     rospy.signal_shutdown('superseded by a newer term')
                     return
-                if active and (now >= next_state or self.keyframe_now):
+                if active and (now >= next_state or self.replicator.want_keyframe):
                     next_state = now + self.replicate_period
-                    self.keyframe_now = False
                     self._publish_state()
                 if standby:
                     self._ask_keyframe(now)
