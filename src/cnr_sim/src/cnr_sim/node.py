@@ -122,7 +122,9 @@ class SimulatorNode:
             raise cnr_params.ConfigError(rospy.get_name(), 'initial_pose', str(exc))
         self.lock = threading.Lock()
         ns = rospy.get_name()
-        self.clock_pub = rospy.Publisher('/clock', Clock, queue_size=10)
+        # 100: a catch-up burst after a stall (up to 0.5 s of wall time, see run()) is ~20 clocks at 2x; a
+        # shorter queue dropped one under CI load and a node saw a 0.1 s jump of sim time
+        self.clock_pub = rospy.Publisher('/clock', Clock, queue_size=100)
         self.next_clock = 0.0           # sim time of the next /clock message (~clock_frequency)
         self.odom_pub = rospy.Publisher('odom', Odometry, queue_size=10)
         self.gt_pub = rospy.Publisher('base_pose_ground_truth', Odometry, queue_size=10)
