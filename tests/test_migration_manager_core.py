@@ -276,6 +276,28 @@ def test_failover_skips_the_freeze_and_waits_for_the_lease():
     assert m.tick(10.75)[0][0] == 'promote'
 
 
+def test_a_lost_instance_on_the_robot_is_recovered_by_its_restarted_standby_after_its_lease():
+    """The robot's own active instance exited (its agent restarted it as a standby): a failover on the same host
+    promotes the standby with the last replicated state once the old lease ran out, retires nothing, and a
+    failed recovery stops nothing (the agent keeps the host's instance)."""
+    g = Grantor('mfg', D, MARGIN)
+    g.promote('mfg@robot', 0.0)
+    g.request('mfg@robot', 1, 1, 10.0)            # its last renewal: valid until 10.6
+    with pytest.raises(ValueError):
+        Migration('mfg', 'robot', 'robot', 'hot', TIMEOUTS, g, 10.7)      # an order to where it is
+    m = Migration('mfg', 'robot', 'robot', 'hot', TIMEOUTS, g, 10.7, failover=True)
+    m.replicated = b'replicated'
+    assert m.recovery and m.begin(10.7, True) == [] and m.step is Step.WAITING_LEASE
+    actions = m.tick(10.76)
+    assert actions == [('promote', 'robot', (m.term, b'replicated'))] and g.holder == 'mfg@robot'
+    assert m.term > 1 and m.target_active(10.8, m.term) == [] and m.step is Step.DONE     # nothing retired
+
+    failed = Migration('mfg', 'robot', 'robot', 'hot', TIMEOUTS, g, 20.0, failover=True)
+    failed.begin(20.0, True)
+    failed.tick(20.0)
+    assert failed.target_failed(20.1, 'promote refused') == [] and failed.step is Step.FAILED
+
+
 def test_first_start_has_no_source():
     g = Grantor('mfg', D, MARGIN)
     m = Migration('mfg', '', 'robot', 'cold', TIMEOUTS, g, 0.0)

@@ -8,7 +8,8 @@ calls the global goal manager 20 times a second and records which instance answe
 - exactly one active under a partition: cut the link while the module is active on the cloud: the cloud
   instance closes its outputs, the robot's is promoted; after the link returns there is still exactly one;
 - rollback: a target that crashes at start leaves the module where it was, answering throughout;
-- a migration ordered while the link is down is rolled back: the module is not stranded on the unreachable side.
+- a migration ordered while the link is down is rolled back: the module is not stranded on the unreachable side;
+- the robot's active instance killed: its agent's restart is promoted (recovery on the same host).
 The figures (downtime) are the benchmark's business (launch_scripts/bench_migration.sh); bounds here are loose.
 """
 import csv
@@ -238,6 +239,28 @@ def test_exactly_one_active_under_a_partition(bed):
                'the cloud instance to step down')
     p = bed.placement()[MODULE]
     assert p[0] == 'robot' and p[1] > term_cloud
+    assert (bed.status('robot') or {}).get('role') == 'active'
+    assert (bed.status('cloud') or {}).get('role') != 'active'
+
+
+def test_the_robot_s_active_instance_killed_is_replaced_by_its_restart(bed):
+    """The robot's own active instance dies (SIGKILL): its agent starts it again as a standby, and the manager
+    promotes that standby once the dead one's lease ran out (before, nothing promoted it: the module had no
+    active instance until the next migration order)."""
+    import signal
+    if bed.placement()[MODULE][0] != 'robot':
+        assert bed.migrate('robot', 'cold').returncode == 0
+    term = bed.placement()[MODULE][1]
+    out = bed.rosrun('robot', 'rostopic', 'echo', '-n', '1', '/migration/agents/robot/health', timeout=15)
+    health = yaml.safe_load(out.stdout.split('---')[0])
+    pid = health['pids'][health['modules'].index(MODULE)]
+    assert pid > 0 and health['states'][health['modules'].index(MODULE)] == 'running', health
+    t_kill = time.time()
+    os.kill(pid, signal.SIGKILL)
+    wait_until(lambda: bed.placement()[MODULE][1] > term and bed.placement()[MODULE][0] == 'robot', 90,
+               'a new term on the robot')
+    wait_until(lambda: bed.answers(t_kill + 0.5), 30, 'answers from the restarted instance')
+    print(f'answers again {bed.answers(t_kill + 0.5)[0] - t_kill:.1f} s after the kill')
     assert (bed.status('robot') or {}).get('role') == 'active'
     assert (bed.status('cloud') or {}).get('role') != 'active'
 

@@ -112,6 +112,22 @@ def test_uri_spelling_alternates_per_generation():
     assert sync.uri_spelling('http://h:1', 1) == 'http://h:1/'
 
 
+def test_a_node_the_master_still_holds_keeps_its_spelling():
+    """rosmaster keeps a node while any registration lists it (a proxy's service a local provider took over):
+    the other spelling would make it shut down the URI it holds, which is the remote node itself."""
+    wanted = {'/robot/move_base': 'http://10.77.0.1:45105', '/robot/mfg': 'http://10.77.0.1:40049',
+              '/robot/new': 'http://10.77.0.1:5000/'}
+    known = {'/robot/move_base': 'http://10.77.0.1:45105/',     # held under the other spelling
+             '/robot/mfg': 'http://10.77.0.1:40049',            # held as we would register it
+             '/robot/old': 'http://10.77.0.1:1/',               # not ours to register
+             '/robot/new': 'http://10.77.0.1:6000/'}            # another process of that name: not the same node
+    kept = sync.kept_spellings(wanted, known)
+    assert kept == {'/robot/move_base': 'http://10.77.0.1:45105/'}
+    a = sync.Registration('pub', '/t', '/robot/move_base', 'http://10.77.0.1:45105', 'std_msgs/String')
+    b = sync.Registration('sub', '/u', '/robot/mfg', 'http://10.77.0.1:40049', 'std_msgs/String')
+    assert sync.respell({a, b}, kept) == {a._replace(caller_api='http://10.77.0.1:45105/'), b}
+
+
 def test_diff_and_identity_conflicts():
     a = sync.Registration('pub', '/t', '/cloud/n', 'http://h:1/', 'std_msgs/String')
     b = sync.Registration('pub', '/t', '/cloud/n', 'http://h:1', 'std_msgs/String')

@@ -430,13 +430,21 @@ class Manager:
             for book in self.books.values():
                 with self.lock:
                     holder_host = book.host()
-                    lapsed = (book.migration is None and holder_host and holder_host != self.cfg.authority
-                              and book.grantor.term in book.first_grant and now > book.grantor.valid_until)
+                    idle = book.migration is None and holder_host and now > book.grantor.valid_until
+                    lapsed = (idle and holder_host != self.cfg.authority and book.grantor.term in book.first_grant)
+                    # the authority's own instance lost its lease (it exited: its agent restarts it as a standby;
+                    # or an earlier recovery failed): that standby takes over, nothing else would
+                    lost_here = (idle and holder_host == self.cfg.authority
+                                 and self._standby(book, self.cfg.authority))
                 if lapsed and self.cfg.failover:
                     rospy.logwarn(f'{book.module}: the active instance on {holder_host} lost its lease (cut off?): '
                                   f'failing over to {self.cfg.authority}')
                     mode = 'hot' if book.module in self.cfg.hot_standby else 'cold'
                     threading.Thread(target=self._failover, args=(book.module, mode), daemon=True).start()
+                elif lost_here and self.cfg.failover:
+                    rospy.logwarn(f'{book.module}: the active instance on {holder_host} lost its lease and a '
+                                  f'standby is ready there (restarted by its agent): promoting it')
+                    threading.Thread(target=self._failover, args=(book.module, 'hot'), daemon=True).start()
             if now >= next_announce:
                 next_announce = now + self.cfg.status_period
                 for book in self.books.values():

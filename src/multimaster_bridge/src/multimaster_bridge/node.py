@@ -39,6 +39,7 @@ class PeerState:
         self.last_hb: Optional[Tuple[float, float]] = None   # (peer's t1, our receive time t2)
         self.last_req = -math.inf
         self.registered: Set[sync.Registration] = set()
+        self.kept_spelling: Dict[str, str] = {}    # caller_id -> URI spelling the master still holds (this generation)
         self.lost_at = -math.inf
         self.returned_at = -math.inf
 
@@ -181,6 +182,14 @@ class MasterClient:
             if result[0] != 1:
                 failures.append(f'{r.kind} {r.name} as {r.caller_id}: {result[1]}')
         return failures
+
+    def node_apis(self, caller_ids: List[str]) -> Dict[str, str]:
+        """caller_id -> URI for those the master knows (its own node table: an entry stays while any
+        registration lists it, even one that getSystemState no longer shows)."""
+        multi = xmlrpc.client.MultiCall(self._proxy())
+        for cid in caller_ids:
+            multi.lookupNode(self.caller_id, cid)
+        return {cid: uri for cid, (code, _, uri) in zip(caller_ids, multi()) if code == 1}
 
     def register_service(self, caller_id: str, service: str, service_api: str, caller_api: str) -> None:
         self._proxy().registerService(caller_id, service, service_api, caller_api)
@@ -367,6 +376,7 @@ class Bridge:
                 peer.state = None
                 peer.state_digest = ''
                 peer.generation += 1
+                peer.kept_spelling = {}
                 rospy.logwarn(f'bridge: peer {peer.peer.name} lost (nothing heard for '
                               f'{self.cfg.loss_timeout:.1f} s): removing its {len(peer.registered)} '
                               f'registrations')
@@ -391,8 +401,20 @@ class Bridge:
                                    self.local_ages, self.local_md5s, generation)
                 for problem in result.problems:
                     self._report(problem)
-                desired = result.registrations
+                desired = sync.respell(result.registrations, peer.kept_spelling)
             unregister, register = sync.diff(peer.registered, desired)
+            held = {r.caller_id for r in peer.registered}
+            arriving = {r.caller_id: r.caller_api for r in register if r.caller_id not in held}
+            if arriving:
+                kept = sync.kept_spellings(arriving, self.master.node_apis(sorted(arriving)))
+                for cid, api in kept.items():
+                    rospy.logwarn(f'bridge: {peer.peer.name}: the master still holds {cid} at {api} (a service '
+                                  f'of it that a local provider took over): registering it there, not under the '
+                                  f'other spelling (that would shut the real node down)')
+                if kept:
+                    peer.kept_spelling.update(kept)
+                    desired = sync.respell(desired, peer.kept_spelling)
+                    unregister, register = sync.diff(peer.registered, desired)
             # a proxy's URI spelling changes only after its old registrations are gone from the master
             waiting = {r.caller_id for r in register
                        if r.caller_id in snap.nodes and snap.nodes[r.caller_id] != r.caller_api}

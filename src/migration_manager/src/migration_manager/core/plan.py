@@ -18,7 +18,9 @@ stopped or goes back to standby). If the source cannot be reached to freeze it (
 with the last replicated state once the source's lease has run out: never two active. If the target fails or
 times out, the migration is rolled back: before the freeze nothing has changed; after it the source is promoted
 again under a new term (it never stopped running), so the module is never without an active instance for longer
-than the configured timeouts.
+than the configured timeouts. A *recovery* is a failover on the same host: the robot's own active instance was
+lost (it exited and its agent restarted it as a standby); the standby is promoted with the last replicated state
+once the old lease has run out.
 
 The class performs no I/O: each event returns the actions for the caller (the manager node) to carry out.
 """
@@ -88,12 +90,18 @@ class Migration:
     def __post_init__(self) -> None:
         if self.mode not in MODES:
             raise ValueError(f'mode must be one of {", ".join(MODES)}, got {self.mode!r}')
-        if self.source == self.target:
+        if self.source == self.target and not self.failover:
             raise ValueError(f'{self.module} is already on {self.target}')
 
     # ------------------------------------------------------------------ helpers
     def _note(self, now: float, message: str) -> None:
         self.events.append(Event(now, self.step.value, message))
+
+    @property
+    def recovery(self) -> bool:
+        """A failover on the same host: its active instance was lost (exited, restarted by its agent as a
+        standby) and that standby takes over with the last replicated state once the old lease ran out."""
+        return self.failover and self.source == self.target
 
     @property
     def finished(self) -> bool:
@@ -170,7 +178,7 @@ class Migration:
         dt = self.downtime
         self._note(now, f'switched to {self.target} (term {term}); hand-over {1000 * dt:.0f} ms'
                         if dt is not None else f'switched to {self.target} (term {term})')
-        if not self.source:
+        if not self.source or self.recovery:
             return []
         return [('retire', self.source, self.mode)]
 
@@ -179,6 +187,13 @@ class Migration:
         if self.finished or self.step is Step.ROLLING_BACK:
             return []
         self.error = why
+        if self.recovery:
+            # the host's own instance was lost and its restart did not take over: its agent restarts it again
+            # (stopping it would leave the host without one) and the manager recovers once it is ready
+            self.grantor.revoke()
+            self.step = Step.FAILED
+            self._note(now, f'recovery on {self.target} failed ({why}): no active instance until the next try')
+            return []
         if self.step is Step.STARTING:
             self.step = Step.ROLLED_BACK       # nothing handed over: the source never stopped
             self._note(now, f'rolled back before the hand-over: {why}')

@@ -19,6 +19,11 @@ Rules (see the package README):
 * **Forced reconnect**: after a peer was lost, its nodes are registered under the other spelling of their
   URI (with or without the trailing slash). rospy subscribers connect again (they skip a URI they are
   already connected to, even over a dead TCP link) and the publisher drops the stale connection.
+  Unless the master still holds the node under the old spelling (:func:`kept_spellings`): rosmaster keeps a
+  node's entry while it lists any registration, and a proxy's service that a newer local provider took over
+  stays listed for ever (its unregistration no longer matches). Registering the other spelling then makes
+  rosmaster shut down "the old node" — the old spelling is the remote node's own URI, so the real node on the
+  other host would be told to exit. Such a node keeps the master's spelling.
 """
 from __future__ import annotations
 
@@ -210,6 +215,19 @@ def plan(peer: str, state: dict, local: Snapshot, owned: Set[str], topics: Filte
 def diff(current: Set[Registration], desired: Set[Registration]) -> Tuple[List[Registration], List[Registration]]:
     """(to unregister, to register): unregistrations first, so a node's URI spelling never changes in place."""
     return sorted(current - desired), sorted(desired - current)
+
+
+def kept_spellings(wanted: Dict[str, str], known: Dict[str, str]) -> Dict[str, str]:
+    """caller_id -> the URI the master still holds for it, where that is another spelling of the URI ``wanted``
+    would register (``known``: the master's lookupNode answers). Registering ``wanted``'s spelling would make
+    rosmaster shut the node down at the spelling it holds, which is the remote node itself."""
+    return {cid: known[cid] for cid, api in wanted.items()
+            if cid in known and known[cid] != api and known[cid].rstrip('/') == api.rstrip('/')}
+
+
+def respell(registrations: Iterable[Registration], apis: Dict[str, str]) -> Set[Registration]:
+    """``registrations`` with each caller_id in ``apis`` registered at that URI instead."""
+    return {r._replace(caller_api=apis[r.caller_id]) if r.caller_id in apis else r for r in registrations}
 
 
 def conflicting_identities(to_register: Iterable[Registration], keep: Iterable[Registration]) -> Set[str]:
