@@ -13,7 +13,7 @@ from cnr_maps.grid import MapcellGrid
 from mfg.core.activity import ActivityTracker
 from mfg.core.detector import Detector, DetectorConfig
 from mfg.core.fallback import LocalGoals
-from mfg.core.memory import MEASUREMENTS_HANDED_OVER, Goal, Memory
+from mfg.core.memory import MEASUREMENTS_HANDED_OVER, MEASUREMENTS_KEPT, Goal, Memory
 from mfg.core.search import HotspotSearch
 
 AMBIENT = DetectorConfig(mode='ambient', ambient=22.0, delta=2.0, z=3.0, min_samples=20)
@@ -234,6 +234,28 @@ def test_memory_hands_over_bounded_measurements_and_trail():
     assert len(state['measurements']) == MEASUREMENTS_HANDED_OVER
     assert state['measurements'][-1] == list(m.measurements[-1])
     assert len(state['cell_trail']) <= 100 and state['cell_trail'][-1] == m.cell_trail[-1]
+
+
+def test_a_late_measurement_is_kept_in_stamp_order_and_the_state_is_taken_over():
+    """A store that recovered measurements from the merger after a failover publishes them after newer ones: the
+    memory keeps stamp order, so its state is one another instance accepts (it refused "stamps must not
+    decrease", and the module was left with no active instance)."""
+    m = memory()
+    m.mode = 'PATROL'
+    inputs = patrol_inputs(40)
+    for x in inputs[:20] + inputs[25:] + inputs[20:25]:        # five arrive late
+        m.observe(*x)
+    assert list(m.measurements) == inputs
+    assert memory().restore(handed_over(m.to_state())) == 0
+    full = memory()
+    for x in patrol_inputs(MEASUREMENTS_KEPT + 10)[10:]:
+        full.observe(*x)
+    oldest = full.measurements[0]
+    full.observe(oldest[0] - 1.0, oldest[1], 20.0)                # older than all kept: dropped
+    assert full.measurements[0] == oldest and len(full.measurements) == MEASUREMENTS_KEPT
+    full.observe(full.measurements[5][0] + 1e-3, oldest[1], 20.0)
+    assert len(full.measurements) == MEASUREMENTS_KEPT
+    assert all(a[0] <= b[0] for a, b in zip(full.measurements, list(full.measurements)[1:]))
 
 
 def test_a_standby_replays_what_arrived_after_the_state_and_may_trigger_from_it():

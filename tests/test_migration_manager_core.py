@@ -249,7 +249,7 @@ def test_a_target_that_crashes_after_the_freeze_gives_the_module_back_to_the_sou
     assert actions == [('stop', 'cloud', None)] and m.step is Step.ROLLING_BACK
     assert m.tick(0.2 + D) == []                  # its lease may still run
     actions = m.tick(0.2 + D + MARGIN)
-    assert actions == [('promote', 'robot', (term + 2, b's'))] and m.step is Step.ROLLED_BACK
+    assert actions == [('promote', 'robot', (term + 2, None))] and m.step is Step.ROLLED_BACK   # keeps its own
     assert g.holder == 'mfg@robot'
 
 

@@ -9,6 +9,7 @@ through the restored detector, so nothing that arrived during the hand-over is l
 """
 from __future__ import annotations
 
+import bisect
 from collections import deque
 from dataclasses import dataclass
 from typing import Any, Deque, Dict, List, Optional, Tuple
@@ -110,7 +111,7 @@ class Memory:
         Updates the statistics, the visit times and the trail; an abnormal value while patrolling (not near a
         found hotspot, no search pending) becomes the trigger, which is returned.
         """
-        self.measurements.append((t, cell, temperature))
+        self._keep((t, cell, temperature))
         self.local_goals.visited(cell, t)
         if not self.cell_trail or self.cell_trail[-1] != cell:
             self.cell_trail.append(cell)
@@ -121,6 +122,21 @@ class Memory:
             self.trigger = Trigger(t, cell, temperature, previous)
             return self.trigger
         return None
+
+    def _keep(self, m: Measurement) -> None:
+        """Kept in stamp order (the state's invariant): a late one — a store recovered it from the merger after a
+        failover and published it after newer ones — goes to its place, or is dropped if older than all kept."""
+        ms = self.measurements
+        if not ms or m[0] >= ms[-1][0]:
+            ms.append(m)
+            return
+        i = bisect.bisect_right(ms, m[0], key=lambda x: x[0])
+        if len(ms) == ms.maxlen:
+            if i == 0:
+                return
+            ms.popleft()
+            i -= 1
+        ms.insert(i, m)
 
     def values(self, cell: int, since: float = float('-inf')) -> List[float]:
         """Temperatures measured in ``cell`` with a stamp >= ``since`` [s], oldest first."""

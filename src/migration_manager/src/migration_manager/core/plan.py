@@ -221,7 +221,9 @@ class Migration:
             self.term = self.grantor.promote(instance_id(self.module, self.source), now)
             self.step = Step.ROLLED_BACK
             self._note(now, f'{self.source} promoted again (term {self.term})')
-            return [('promote', self.source, (self.term, self.state))]
+            # without a state: the source keeps its own (the one it froze with, and what it took in since); sending
+            # its frozen state back gained nothing, and a state it refused would have left no active instance
+            return [('promote', self.source, (self.term, None))]
         if self.step in (Step.STARTING, Step.PROMOTING) and now > self.deadline:
             return self.target_failed(now, f'{self.step.value} timed out')
         if self.step is Step.FREEZING and now > self.deadline:
