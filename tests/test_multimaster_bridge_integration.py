@@ -199,50 +199,6 @@ def test_a_proxy_never_shuts_down_a_local_node_of_the_same_name(bridged):
     assert robot.call('lookupNode', '/cloud/talker') == robot_uri
 
 
-# a node that publishes /chatter and serves /rtt/echo (std_srvs/Empty)
-DUAL = ("import rospy, std_msgs.msg, std_srvs.srv\n"
-        "rospy.init_node('dual')\n"
-        "rospy.Service('/rtt/echo', std_srvs.srv.Empty, lambda req: std_srvs.srv.EmptyResponse())\n"
-        "pub = rospy.Publisher('/chatter', std_msgs.msg.String, queue_size=1)\n"
-        "rate = rospy.Rate(5)\n"
-        "while not rospy.is_shutdown():\n"
-        "    pub.publish('dual')\n"
-        "    rate.sleep()\n")
-
-
-def lookup(side, method, name):
-    try:
-        return side.call(method, name)
-    except RuntimeError:          # unknown
-        return ''
-
-
-def test_a_remote_node_whose_service_a_local_one_took_over_survives_an_outage(bridged):
-    """rosmaster keeps /robot/dual on the cloud master while the service a newer cloud provider took over still
-    lists it; after an outage the bridge re-registers /robot/dual's publisher under the other spelling of its URI
-    (the forced reconnect), which made rosmaster tell "the old node" — the robot's real node — to shut down."""
-    tb, robot, cloud, procs = bridged
-    dual = robot.run(['/usr/bin/python3', '-c', DUAL], 'dual')
-    wait_until(lambda: '/robot/dual' in publishers(cloud, '/chatter')
-               and lookup(cloud, 'lookupService', '/rtt/echo') == lookup(robot, 'lookupService', '/rtt/echo') != '',
-               20, 'the robot node on the cloud master')
-    robot_uri = robot.call('lookupNode', '/dual')
-    cloud.run(['/usr/bin/python3', '-c', DUAL.replace("'dual'", "'server'", 1)], 'server')
-    robot_service = robot.call('lookupService', '/rtt/echo')
-    wait_until(lambda: lookup(cloud, 'lookupService', '/rtt/echo') not in ('', robot_service), 20,
-               'the cloud provider to take the service over')
-    assert lookup(cloud, 'lookupNode', '/robot/dual'), 'the cloud master forgot /robot/dual: the case is not set up'
-
-    tb.set('both', outage=True)
-    wait_until(lambda: '/robot/dual' not in publishers(cloud, '/chatter'), 10, 'the outage to remove the proxy')
-    tb.set('both', outage=False)
-    wait_until(lambda: '/robot/dual' in publishers(cloud, '/chatter'), 10, 'the proxy to come back')
-    time.sleep(1.0)     # a shutdown request is sent from the master's thread pool right after the registration
-    assert dual.poll() is None, 'the robot node was shut down by the cloud master: ' + log(dual)[-1500:]
-    assert robot.call('lookupNode', '/dual') == robot_uri
-    assert 'still holds /robot/dual' in log(procs[1])
-
-
 def test_service_handover_is_make_before_break(bridged):
     tb, robot, cloud, _ = bridged
     old = robot.run(['rosrun', 'cnr_benchmarks', 'echo_monitor'], 'monitor_robot')

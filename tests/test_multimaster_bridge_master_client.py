@@ -1,8 +1,12 @@
 """The bridge's client of its local master against a real rosmaster (port 0): an unchanged graph costs one
 request and no parsing; any change in the graph gives a new snapshot with it."""
+import os
+import subprocess
+import time
 import xmlrpc.client
 
-from cnr_harness import RosMaster
+from cnr_harness import RosMaster, wait_until
+from multimaster_bridge.core import sync
 from multimaster_bridge.node import MasterClient
 
 
@@ -66,3 +70,43 @@ def test_a_service_with_a_new_provider_gets_the_new_providers_uri_between_refres
         assert second.service_apis['/next_goal'] == 'rosrpc://127.0.0.1:20002'
         assert second.nodes['/ggm'] == 'http://127.0.0.1:10002/'
         assert second.nodes['/talker'] == 'http://127.0.0.1:10003/'      # kept from before
+
+
+def test_a_node_the_master_still_holds_keeps_its_uri_spelling_and_the_real_node_lives():
+    """rosmaster keeps a node while any registration lists it; a proxy's service that a local provider took over
+    stays listed after the proxy's removal. The bridge's forced reconnect (the other URI spelling) would then
+    make rosmaster shut down the URI it holds — the real remote node (here a real rostopic process whose URI the
+    proxy carries). node_apis sees the entry, kept_spellings keeps the master's spelling, the node lives; the
+    other spelling, as the bridge registered it before, shuts it down."""
+    with RosMaster() as master:
+        env = dict(os.environ, ROS_MASTER_URI=master.uri)
+        node = subprocess.Popen(['rostopic', 'pub', '-r', '5', '/chatter', 'std_msgs/String', 'data: x',
+                                 '__name:=dual'], env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        try:
+            px = xmlrpc.client.ServerProxy(master.uri)
+            wait_until(lambda: px.lookupNode('/test', '/dual')[0] == 1, 30, 'the real node')
+            uri = px.lookupNode('/test', '/dual')[2]
+            # its proxy (as another bridge names it), with a service a newer local provider then takes over
+            px.registerPublisher('/robot/dual', '/chatter_proxy', 'std_msgs/String', uri)
+            px.registerService('/robot/dual', '/echo', 'rosrpc://127.0.0.1:1', uri)
+            px.registerService('/server', '/echo', 'rosrpc://127.0.0.1:2', 'http://127.0.0.1:3/')
+            # the peer lost: the proxy's registrations removed (the service's no longer matches)
+            px.unregisterService('/robot/dual', '/echo', 'rosrpc://127.0.0.1:1')
+            px.unregisterPublisher('/robot/dual', '/chatter_proxy', uri)
+            client = MasterClient(master.uri, '/bridge')
+            known = client.node_apis(['/robot/dual', '/nobody'])
+            assert known == {'/robot/dual': uri}
+            other = sync.uri_spelling(uri, 1)
+            kept = sync.kept_spellings({'/robot/dual': other}, known)
+            assert kept == {'/robot/dual': uri}
+            px.registerPublisher('/robot/dual', '/chatter_proxy', 'std_msgs/String', kept['/robot/dual'])
+            time.sleep(1.0)        # a shutdown would be on its way at once (the master's thread pool)
+            assert node.poll() is None, 'the real node was shut down'
+            # the other spelling: rosmaster tells "the old node" - the real one - to shut down
+            px.unregisterPublisher('/robot/dual', '/chatter_proxy', uri)
+            px.registerPublisher('/robot/dual', '/chatter_proxy', 'std_msgs/String', other)
+            wait_until(lambda: node.poll() is not None, 15, 'rosmaster to shut the real node down')
+        finally:
+            if node.poll() is None:
+                node.kill()
+            node.wait()
