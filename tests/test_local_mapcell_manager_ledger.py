@@ -9,10 +9,10 @@ import pytest
 
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.measurements import HEADER, HEADER_LINE, format_row, read_tsv
-from local_mapcell_manager.core.ledger import (DUPLICATE, OUTSIDE, STORED, Dedup, Ledger, Reading, parse_state,
-                                               state_newest)
+from local_mapcell_manager.core.ledger import (DUPLICATE, OUTSIDE, STORED, Dedup, Ledger, Prepared, Reading,
+                                               parse_state, state_newest)
 from merger.core.retention import Retention
-from local_mapcell_manager.core.store import MeasurementStore
+from local_mapcell_manager.core.store import Draft, MeasurementStore
 from migration_manager.core import state as codec
 
 GRID = MapcellGrid(min_x=0.0, min_y=-1.0, cell_size=1.0, cols=11, rows=2)
@@ -189,12 +189,16 @@ def test_a_state_that_does_not_fit_is_refused_naming_the_field_and_nothing_chang
 
 
 # -- the hand-over ---------------------------------------------------------------------------------
-def hand_over(tmp_path, j, k, lapse=()):
+def hand_over(tmp_path, j, k, lapse=(), replicas=False):
     """A is active and gets the stream up to k (not publishing at the indices in ``lapse``); B is a standby
     from index j (its subscription connected then); A is frozen after k readings and B promoted with A's state;
-    the rest of the stream goes to B only."""
+    the rest of the stream goes to B only. With ``replicas``, A replicates its state every third reading (a
+    whole one every third replica, patches between: the wire of migration_manager), B prepares its store from
+    each, and the state handed over is a patch to B's newest replica."""
     s = stream()
     a, b = ledger(tmp_path, 'a'), ledger(tmp_path, 'b', active=False)
+    replicator, replica = codec.Replicator('local_mapcell_manager', 3), codec.Replica('local_mapcell_manager')
+    prepared = Prepared(GRID, b.store) if replicas else None
     published_a, published_b = [], []
     for i, r in enumerate(s[:k]):
         a.receive(r)
@@ -202,12 +206,22 @@ def hand_over(tmp_path, j, k, lapse=()):
             b.receive(r)
         if i not in lapse:
             publish(a, published_a)
+        if replicas and i % 3 == 2:
+            assert replica.take('a', *replicator.next(a.state()))
+            prepared.update(replica.state)
     assert a.freeze()
-    state = wire(a.state())
+    if replicas:
+        state = replica.resolve('a', replicator.final(a.state(), replica.seq))
+    else:
+        state = wire(a.state())
     for r in s[k:k + 2]:                                     # between the freeze and the promotion
         a.receive(r)
         b.receive(r)
-    b.restore(state)
+    replay = b.restore(state, prepared)
+    # what a replica held was prepared ahead (checked, filed, written), not parsed again; no draft left
+    assert replay.prepared == (None if not replicas or replica.state is None else     # (none came: whole)
+                               len(replica.state['measurements']['measurement']))
+    assert not [f for f in os.listdir(tmp_path) if '.draft-' in f]
     for r in s[k + 2:k + 4]:                                 # promoted, not active yet
         b.receive(r)
     b.activated()
@@ -218,11 +232,12 @@ def hand_over(tmp_path, j, k, lapse=()):
     return a, b, published_a, published_b
 
 
+@pytest.mark.parametrize('replicas', [False, True], ids=['state', 'replicas'])
 @pytest.mark.parametrize('j,k', [(0, 0), (0, 5), (3, 11), (10, 11), (11, 11), (10, 12), (15, 16), (19, 21), (20, 22),
                                  (21, 23), (5, 30)])
-def test_standby_with_an_overlapping_buffer_ends_with_every_measurement_exactly_once(tmp_path, j, k):
+def test_standby_with_an_overlapping_buffer_ends_with_every_measurement_exactly_once(tmp_path, j, k, replicas):
     ref = reference(tmp_path)
-    a, b, pa, pb = hand_over(tmp_path, j, k)
+    a, b, pa, pb = hand_over(tmp_path, j, k, replicas=replicas)
     assert rows(b) == rows(ref) and cells(b) == cells(ref) and b.c.dedup.keys == ref.c.dedup.keys
     # (a duplicate among the replayed readings is not told from the overlap: the counter is a diagnostic)
     assert b.outside == ref.outside and b.duplicates <= ref.duplicates
@@ -394,3 +409,56 @@ def test_replace_is_atomic(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match='cannot rewrite the store'):
         b.restore(lg.state())
     assert b.count == 0 and b.mode == 'buffering'
+
+
+# -- a standby's store prepared from the replicas ------------------------------------------------------
+def test_a_prepared_store_that_does_not_fit_the_state_is_dropped_and_the_state_restored_whole(tmp_path):
+    a = reference(tmp_path)
+    other = ledger(tmp_path, 'other')                       # another instance's content: not a prefix of a's
+    for r in stream()[3:9]:
+        other.receive(r)
+    b = ledger(tmp_path, 'b', active=False)
+    prepared = Prepared(GRID, b.store)
+    assert prepared.update(wire(other.state())) == other.count
+    assert prepared.update(wire(other.state())) == 0        # the same again: nothing to add
+    assert prepared.update(wire(a.state())) == a.count      # not an extension: prepared anew
+    assert len([f for f in os.listdir(tmp_path) if '.draft-' in f]) == 1
+    prepared.update(wire(other.state()))
+    replay = b.restore(wire(a.state()), prepared)
+    assert replay.prepared is None and rows(b) == rows(a) and cells(b) == cells(a)
+    with open(a.store.path) as fa, open(b.store.path) as fb:
+        assert fb.read() == fa.read()
+    assert not [f for f in os.listdir(tmp_path) if '.draft-' in f]
+    assert prepared.measurements == [] and prepared.draft is None     # used up
+
+
+def test_a_replica_that_does_not_fit_the_grid_is_refused_naming_the_field(tmp_path):
+    a = reference(tmp_path)
+    b = ledger(tmp_path, 'b', active=False)
+    prepared = Prepared(GRID, b.store)
+    prepared.update(wire(a.state()))
+    bad = wire(a.state())
+    bad['measurements']['cell'][-1] = 999
+    with pytest.raises(ValueError, match=r'measurements\.cell\[\d+\]'):
+        prepared.update(bad)
+    assert prepared.measurements == [] and not [f for f in os.listdir(tmp_path) if '.draft-' in f]
+    # a refused state leaves the ledger and the prepared store as they were: the next promotion uses it
+    prepared.update(wire(a.state()))
+    with pytest.raises(ValueError, match=r'measurements\.cell'):
+        b.restore(bad, prepared)
+    assert b.count == 0 and b.mode == 'buffering' and len(prepared.measurements) == a.count
+    assert b.restore(wire(a.state()), prepared).prepared == a.count and rows(b) == rows(a)
+    assert not [f for f in os.listdir(tmp_path) if '.draft-' in f]
+
+
+def test_drafts_of_ended_processes_are_removed_and_live_ones_kept(tmp_path):
+    store = MeasurementStore(str(tmp_path / 'store.tsv'))
+    live = Draft(store)
+    dead = tmp_path / 'store.tsv.draft-999999999-x.tmp'        # no such pid
+    dead.write_text('x')
+    other = tmp_path / 'other.tsv.draft-999999999-x.tmp'      # another store's
+    other.write_text('x')
+    assert store.remove_stale_drafts() == [str(dead)]
+    assert sorted(os.listdir(tmp_path)) == sorted(['store.tsv', os.path.basename(live.path), other.name])
+    live.discard()
+    assert not os.path.exists(live.path)

@@ -1,8 +1,9 @@
 """``local_mapcell_manager``: mapcells with visits, measurements and statistics; services and a disk store.
 
 Movable by migration_manager: as a managed standby it buffers ``merged_measurements`` but stores, publishes and
-serves nothing; on promotion it takes over the handed-over store (every measurement) and replays its buffer
-over it, so the measurements stored end up exactly once (README "Migration state")."""
+serves nothing, and prepares the store from the active instance's replicas; on promotion it takes over the
+handed-over store (every measurement) and replays its buffer over it, so the measurements stored end up
+exactly once (README "Migration state")."""
 from __future__ import annotations
 
 import math
@@ -20,7 +21,7 @@ from cnr_msgs.srv import (GetCell, GetCellResponse, GetCellStates, GetCellStates
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.measurements import Measurement
 from cnr_params.ros import call_with_timeout, init_node, private_section, quiet_at_shutdown
-from local_mapcell_manager.core.ledger import DUPLICATE, Ledger, Reading, Replay, state_newest
+from local_mapcell_manager.core.ledger import DUPLICATE, Ledger, Prepared, Reading, Replay, state_newest
 from local_mapcell_manager.core.params import ManagerParams, read_params
 from local_mapcell_manager.core.store import CellBook, MeasurementStore
 from migration_manager.instance import Hooks, ManagedInstance, Retiring
@@ -49,7 +50,15 @@ class ManagerNode(Hooks):
         if p.reset_store and os.path.exists(p.store):
             os.replace(p.store, p.store + '.old')
             rospy.loginfo(f'reset_store: moved the previous store to {p.store}.old')
-        self.ledger = Ledger(self.grid, MeasurementStore(p.store, rospy.logwarn), p.standby_buffer, rospy.logwarn)
+        store = MeasurementStore(p.store, rospy.logwarn)
+        for path in store.remove_stale_drafts():
+            rospy.logwarn(f'removed {path}: a draft of the store left by an instance that ended before using it')
+        self.ledger = Ledger(self.grid, store, p.standby_buffer, rospy.logwarn)
+        # a standby's store prepared from the replicas (None once promoted); its own lock, never held with
+        # self.lock by prepare_state, so a replica is prepared while measurements keep arriving
+        self.prepare_lock = threading.Lock()
+        self.prepared: Optional[Prepared] = Prepared(self.grid, store)
+        rospy.on_shutdown(self._discard_prepared)
         rospy.loginfo(f'{len(self.grid)} mapcells ({self.grid.cols} x {self.grid.rows} of {self.grid.cell_size:g} m); '
                       f'{self.ledger.count} stored measurements reloaded from {p.store}')
         self._dirty = True
@@ -107,13 +116,36 @@ class ManagerNode(Hooks):
         with self.lock:
             since = self.ledger.missing_since(state_newest(state))
         recovered = self._recover(since)
-        with self.lock:
+        with self.lock, self.prepare_lock:
             added = self.ledger.recover(recovered)
-            replay = self.ledger.restore(state)        # ValueError: refused, nothing changed
+            replay = self.ledger.restore(state, self.prepared)     # ValueError: refused, nothing changed
+            self.prepared = None
             self._dirty = True
             count = self.ledger.count
-        rospy.loginfo(f'state taken over: {count} measurements; {self._recovered(since, recovered, added)}'
-                      f'{self._replayed(replay)}')
+        ahead = 'restored whole' if replay.prepared is None else f'{replay.prepared} prepared ahead'
+        rospy.loginfo(f'state taken over: {count} measurements ({ahead}); '
+                      f'{self._recovered(since, recovered, added)}{self._replayed(replay)}')
+
+    def prepare_state(self, state: Dict[str, Any]) -> None:
+        """A replica of the active instance: what it adds is checked, filed and written into a draft of the
+        store now, so the promotion's set_state handles only what its state adds (ledger.Prepared)."""
+        with self.prepare_lock:
+            if self.prepared is None:                   # promoted meanwhile
+                return
+            try:
+                self.prepared.update(state)
+            except OSError as exc:
+                raise ValueError(f'cannot write a draft of the store next to {self.p.store}: {exc}') from None
+
+    def _discard_prepared(self) -> None:
+        """Promoted without a state, or shutting down: the prepared store is not used."""
+        if self.prepare_lock.acquire(timeout=1.0):
+            try:
+                prepared, self.prepared = self.prepared, None
+                if prepared is not None:
+                    prepared.discard()
+            finally:
+                self.prepare_lock.release()
 
     def _recover(self, since: Optional[float]) -> List[Reading]:
         """The merger's retained measurements from ``since`` on (README "Recovery"); none if the buffer reaches
@@ -148,6 +180,7 @@ class ManagerNode(Hooks):
         with self.lock:                                 # a promotion without a state: the own content's newest
             since = None if self.ledger.storing else self.ledger.missing_since(self.ledger.newest_time)
         recovered = self._recover(since)
+        self._discard_prepared()                        # (promoted without a state: not used)
         with self.instance.lock, self.lock:
             own = self.ledger.count
             added = self.ledger.recover(recovered)      # nothing when already storing (no gap asked for)

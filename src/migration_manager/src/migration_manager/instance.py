@@ -23,7 +23,8 @@ manager (``~migration/role`` empty or absent: every single-master and fixed-plac
   replicas, patches to the one before between them (:mod:`migration_manager.core.state`); a standby keeps the
   newest replicas and asks the active instance for a whole state (``keyframe``) when it holds none, so that a
   promotion can bring a patch to one of them instead of the whole state; a freeze answers with a patch to the
-  replica the manager says it holds.
+  replica the manager says it holds. A node that implements ``prepare_state`` is given the newest replica as
+  it arrives (in a thread of its own, at its own priority), to do a promotion's bulk ahead.
 
 Topics and services (``<m>`` the module, ``<h>`` this host): ``/migration/<m>/renew`` (out),
 ``/migration/<m>/lease`` (in), ``/migration/<m>/state`` (out, while active), ``/migration/<m>/<h>/status``
@@ -60,6 +61,12 @@ class Hooks:
 
     def set_state(self, state: Dict[str, Any]) -> None:
         raise NotImplementedError
+
+    def prepare_state(self, state: Dict[str, Any]) -> None:
+        """Optional: a standby is given the active instance's newest replica (whole; the newest only, when
+        several arrived meanwhile), so that ``set_state`` at a promotion has less to do. Called in a thread of
+        its own while a standby; one call may still run when the promotion's ``set_state`` begins (the node
+        serialises the two). Must not change ``state``. ValueError: logged (the replica does not fit)."""
 
     def standby_ready(self) -> bool:
         """A standby can be promoted without losing input (e.g. its input subscriptions are connected)."""
@@ -167,6 +174,11 @@ class ManagedInstance:
                                           latch=True)
         rospy.Subscriber(topic(module, 'lease'), MigrationLease, self._on_lease, queue_size=20)
         self.replica_sub: Optional[rospy.Subscriber] = None
+        self.to_prepare: Optional[Dict[str, Any]] = None      # the newest replica not given to prepare_state yet
+        self.prepare_wake = threading.Condition()
+        if type(hooks).prepare_state is not Hooks.prepare_state:
+            # created before the elevated protocol threads: it runs at the module's own priority
+            threading.Thread(target=self._prepare_loop, name='migration-prepare', daemon=True).start()
         self._follow_replicas(True)
         rospy.Service(topic(module, f'{self.host}/control'), InstanceControl, self._on_control)
         threading.Thread(target=self._loop, name='migration-instance', daemon=True).start()
@@ -260,6 +272,8 @@ class ManagedInstance:
                 with self.lock:
                     again = (req.term == self.holder.term and not self.frozen and not self.holder.superseded)
                     if not again:
+                        with self.prepare_wake:           # no replica given to prepare_state from now on
+                            self.to_prepare = None
                         if req.state:
                             with self.replica_lock:       # a patch to a replica it holds: the whole state
                                 state = self.replica.resolve(req.base_instance, req.state)
@@ -427,9 +441,32 @@ class ManagedInstance:
             return
         try:
             with self.replica_lock:
-                self.replica.take(msg.instance, msg.seq, msg.base_seq, bytes(msg.data))
+                taken = self.replica.take(msg.instance, msg.seq, msg.base_seq, bytes(msg.data))
+                newest = self.replica.state
         except state_codec.StateError as exc:
             rospy.logwarn(f'{self.id}: replica {msg.seq} of {msg.instance} ignored: {exc}')
+            return
+        if taken:
+            with self.prepare_wake:
+                self.to_prepare = newest
+                self.prepare_wake.notify()
+
+    def _prepare_loop(self) -> None:
+        """Give the newest replica to ``prepare_state`` while a standby (see :meth:`Hooks.prepare_state`). The
+        promotion takes ``self.lock``; a replica is handed over only under it, while still a standby."""
+        while not rospy.core.is_shutdown_requested():
+            with self.prepare_wake:
+                self.prepare_wake.wait_for(lambda: self.to_prepare is not None, timeout=1.0)
+                state, self.to_prepare = self.to_prepare, None
+            if state is None:
+                continue
+            with self.lock:
+                if self.holder.term != 0 or self.frozen or self.dormant:
+                    continue
+            try:
+                self.hooks.prepare_state(state)
+            except ValueError as exc:
+                rospy.logwarn(f'{self.id}: replica not prepared: {exc}')
 
     def _ask_keyframe(self, now: float) -> None:
         """A standby that holds no replica of the current holder asks it for a whole state (at most once per

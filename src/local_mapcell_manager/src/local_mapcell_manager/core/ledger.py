@@ -20,9 +20,15 @@ one an instance that never moved would have.
 The state handed over (:meth:`Ledger.state`, JSON-able; keys in the package README, "Migration state") holds
 every stored measurement as column lists, the duplicate rule's bookkeeping and the measurements not yet
 published; :func:`parse_state` checks it completely before anything is changed.
+
+A standby does the bulk of a promotion ahead (:class:`Prepared`): from each replica of the active instance it
+checks, files into cells and writes into a draft of its store only the measurements the replica adds, so a
+promotion checks and writes only what its state adds to the newest replica (a store of 7000 measurements took
+31 ms of CPU to restore whole on this machine, three times that on the capped robot).
 """
 from __future__ import annotations
 
+import bisect
 import math
 from collections import deque
 from dataclasses import dataclass
@@ -30,7 +36,7 @@ from typing import Any, Callable, Deque, Dict, Iterable, List, Optional, Sequenc
 
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.measurements import HEADER, Measurement
-from local_mapcell_manager.core.store import CellBook, MeasurementStore
+from local_mapcell_manager.core.store import CellBook, Draft, MeasurementStore
 
 Key = Tuple[float, float, float, float]
 
@@ -87,8 +93,9 @@ class Reading:
 class _Content:
     """Stored measurements with their cells, the duplicate rule and what is not published yet."""
 
-    def __init__(self, grid: MapcellGrid, ms: Sequence[Measurement] = (), dedup: Optional[Dedup] = None) -> None:
-        self.book = CellBook(grid)
+    def __init__(self, grid: MapcellGrid, ms: Sequence[Measurement] = (), dedup: Optional[Dedup] = None,
+                 book: Optional[CellBook] = None) -> None:
+        self.book = book if book is not None else CellBook(grid)   # (``ms`` added to it)
         for m in ms:
             self.book.add(m)
         self.dedup = dedup if dedup is not None else Dedup.of(ms)
@@ -116,6 +123,7 @@ class Replay:
     stored: int = 0           # new: stored now
     known: int = 0            # already in the content (the overlap with the state handed over)
     outside: int = 0          # outside the grid
+    prepared: Optional[int] = None    # restore: the state's measurements a Prepared held (None: restored whole)
 
 
 class Ledger:
@@ -251,25 +259,42 @@ class Ledger:
                 out.known += 1
         return out, new
 
-    def restore(self, state: Dict[str, Any]) -> Replay:
+    def restore(self, state: Dict[str, Any], prepared: Optional['Prepared'] = None) -> Replay:
         """Promotion with a state: the store becomes the state's measurements plus what the buffer adds (the
-        file rewritten atomically), and readings are stored from now on.
+        file rewritten atomically), and readings are stored from now on. With ``prepared`` (this standby's
+        :class:`Prepared`), only what the state adds to it is checked and written; it is used up (a refused
+        state leaves it as it was, unless the store could not be written).
 
         Raises:
             ValueError: the state does not fit (naming the field) or the store cannot be rewritten; nothing
                 changed.
         """
-        h = parse_state(state, self.grid)
-        content = _Content(self.grid, h.measurements, h.dedup)
-        content.unpublished = {m.number: (m, yaw) for m, yaw in h.unpublished}
-        content.duplicates, content.outside = h.duplicates, h.outside
-        replay, _ = self._replay(content)
+        h = parse_state(state, self.grid, prepared)
         try:
-            self.store.replace(content.book.measurements())
-        except OSError as exc:
-            raise ValueError(f'cannot rewrite the store {self.store.path}: {exc}') from None
+            if h.reused is not None:
+                book, draft = prepared.book, prepared.draft
+                prepared.release()                 # (its book and draft are this content's now)
+                content = _Content(self.grid, h.measurements[h.reused:], h.dedup, book=book)
+                added = h.measurements[h.reused:]
+            else:
+                content = _Content(self.grid, h.measurements, h.dedup)
+                draft, added = None, h.measurements
+            content.unpublished = {m.number: (m, yaw) for m, yaw in h.unpublished}
+            content.duplicates, content.outside = h.duplicates, h.outside
+            replay, new = self._replay(content)
+            try:
+                draft = draft if draft is not None else Draft(self.store)
+                draft.append(added)
+                draft.append(new)
+                draft.install()
+            except OSError as exc:
+                raise ValueError(f'cannot rewrite the store {self.store.path}: {exc}') from None
+        finally:
+            if prepared is not None:
+                prepared.discard()             # (unused, or released)
         self.c = content
         self.storing = True
+        replay.prepared = h.reused
         return replay
 
     def take_over(self) -> Optional[Replay]:
@@ -327,6 +352,64 @@ class Handover:
     unpublished: List[Tuple[Measurement, float]]      # (measurement, yaw), in order
     duplicates: int
     outside: int
+    reused: Optional[int] = None                     # the first measurements: a Prepared's (None: not used)
+
+
+class Prepared:
+    """A standby's hand-over done ahead (see the module's doc): the measurements of the newest replica it was
+    given (:meth:`update`), checked, filed into cells and written into a draft of the store. Not thread-safe:
+    the node serialises :meth:`update` and the :meth:`Ledger.restore` that uses it up.
+
+    Raises (update):
+        ValueError: the replica's measurements do not fit the grid (naming the field); the draft is dropped.
+        OSError: the draft cannot be written; dropped.
+    """
+
+    def __init__(self, grid: MapcellGrid, store: MeasurementStore) -> None:
+        self.grid = grid
+        self.store = store
+        self.columns: Optional[List[List[Any]]] = None     # the replica's columns the measurements came from
+        self.measurements: List[Measurement] = []
+        self.book = CellBook(grid)
+        self.draft: Optional[Draft] = None
+
+    def fits(self, columns: List[List[Any]]) -> bool:
+        """Do ``columns`` begin with the measurements prepared? (The replicas' lists share their items: the
+        comparison is mostly by identity.)"""
+        n = len(self.measurements)
+        return (self.columns is not None and
+                all(len(c) >= n and (c is p or c[:n] == p[:n]) for c, p in zip(columns, self.columns)))
+
+    def update(self, state: Any) -> int:
+        """Follow a replica: prepare what it adds (everything, if it does not extend what was prepared).
+        Returns the measurements added."""
+        try:
+            columns = _columns(state)
+            if not self.fits(columns):
+                self.discard()
+            new = _parse_rows(columns, self.grid, len(self.measurements),
+                              self.measurements[-1].number if self.measurements else 0)
+            if self.draft is None:
+                self.draft = Draft(self.store)
+            self.draft.append(new)
+        except (ValueError, OSError):
+            self.discard()
+            raise
+        for m in new:
+            self.book.add(m)
+        self.measurements += new
+        self.columns = columns
+        return len(new)
+
+    def release(self) -> None:
+        """Forget what was prepared without touching it (a restore took the book and the draft)."""
+        self.columns, self.measurements, self.book, self.draft = None, [], CellBook(self.grid), None
+
+    def discard(self) -> None:
+        """Drop what was prepared (the draft deleted)."""
+        if self.draft is not None:
+            self.draft.discard()
+        self.release()
 
 
 def state_newest(state: Any) -> Optional[float]:
@@ -376,8 +459,37 @@ def _number(v: Any, field: str, finite: bool = True) -> float:
 GRID_KEYS = ('min_x', 'min_y', 'cell_size', 'cols', 'rows')
 
 
-def parse_state(state: Any, grid: MapcellGrid) -> Handover:
-    """Check a handed-over state completely against this instance's grid.
+def _columns(state: Any) -> List[List[Any]]:
+    """The state's measurement columns (in HEADER order), checked to be lists of one length."""
+    cols = _item(state, 'measurements', 'measurements')
+    columns = [_list(_item(cols, name, f'measurements.{name}'), f'measurements.{name}') for name in HEADER]
+    for name, col in zip(HEADER, columns):
+        if len(col) != len(columns[0]):
+            raise _fail(f'measurements.{name}', f'has {len(col)} items, measurements.{HEADER[0]} has '
+                                                f'{len(columns[0])}')
+    return columns
+
+
+def _parse_rows(columns: List[List[Any]], grid: MapcellGrid, start: int, last: int) -> List[Measurement]:
+    """The measurements of rows ``start`` on, checked; ``last``: the number of the row before (0: none)."""
+    ms: List[Measurement] = []
+    for i, (number, t, x, y, temp, cell, row, col, pose_time) in enumerate(zip(*(c[start:] for c in columns)),
+                                                                          start):
+        last = _integer(number, f'measurements.measurement[{i}]', minimum=last + 1)    # increasing
+        cell = _integer(cell, f'measurements.cell[{i}]', minimum=0)
+        row, col = _integer(row, f'measurements.row[{i}]'), _integer(col, f'measurements.col[{i}]')
+        if cell >= len(grid) or grid.row_col(cell) != (row, col):
+            raise _fail(f'measurements.cell[{i}]', f'{cell} (row {row}, col {col}) is not a cell of the grid')
+        ms.append(Measurement(last, _number(t, f'measurements.time[{i}]'), _number(x, f'measurements.x[{i}]'),
+                              _number(y, f'measurements.y[{i}]'),
+                              _number(temp, f'measurements.temperature[{i}]'), cell, row, col,
+                              _number(pose_time, f'measurements.pose_time[{i}]')))
+    return ms
+
+
+def parse_state(state: Any, grid: MapcellGrid, prepared: Optional[Prepared] = None) -> Handover:
+    """Check a handed-over state completely against this instance's grid; the measurements a ``prepared``
+    holds (when the state's begin with them) were checked when they were prepared (``reused``).
 
     Raises:
         ValueError: naming the first field that is missing, of the wrong type, or inconsistent.
@@ -388,24 +500,14 @@ def parse_state(state: Any, grid: MapcellGrid) -> Handover:
     if theirs != ours:
         raise _fail('grid', f'{theirs} is not this instance\'s grid {ours}')
 
-    cols = _item(state, 'measurements', 'measurements')
-    columns = [_list(_item(cols, name, f'measurements.{name}'), f'measurements.{name}') for name in HEADER]
-    for name, col in zip(HEADER, columns):
-        if len(col) != len(columns[0]):
-            raise _fail(f'measurements.{name}', f'has {len(col)} items, measurements.{HEADER[0]} has '
-                                                f'{len(columns[0])}')
-    ms: List[Measurement] = []
-    last = 0
-    for i, (number, t, x, y, temp, cell, row, col, pose_time) in enumerate(zip(*columns)):
-        last = _integer(number, f'measurements.measurement[{i}]', minimum=last + 1)    # increasing
-        cell = _integer(cell, f'measurements.cell[{i}]', minimum=0)
-        row, col = _integer(row, f'measurements.row[{i}]'), _integer(col, f'measurements.col[{i}]')
-        if cell >= len(grid) or grid.row_col(cell) != (row, col):
-            raise _fail(f'measurements.cell[{i}]', f'{cell} (row {row}, col {col}) is not a cell of the grid')
-        ms.append(Measurement(last, _number(t, f'measurements.time[{i}]'), _number(x, f'measurements.x[{i}]'),
-                              _number(y, f'measurements.y[{i}]'),
-                              _number(temp, f'measurements.temperature[{i}]'), cell, row, col,
-                              _number(pose_time, f'measurements.pose_time[{i}]')))
+    columns = _columns(state)
+    reused = None
+    if prepared is not None and prepared.fits(columns):
+        reused = len(prepared.measurements)
+        ms = prepared.measurements + _parse_rows(columns, grid, reused,
+                                                 prepared.measurements[-1].number if reused else 0)
+    else:
+        ms = _parse_rows(columns, grid, 0, 0)
 
     newest = _item(state, 'newest', 'newest')
     raw_time = _item(newest, 'time', 'newest.time')
@@ -426,14 +528,14 @@ def parse_state(state: Any, grid: MapcellGrid) -> Handover:
     yaws = _list(_item(unpub, 'yaw', 'unpublished.yaw'), 'unpublished.yaw')
     if len(yaws) != len(numbers):
         raise _fail('unpublished.yaw', f'has {len(yaws)} items, unpublished.measurement has {len(numbers)}')
-    stored = {m.number: m for m in ms}
     unpublished: List[Tuple[Measurement, float]] = []
     for i, (number, yaw) in enumerate(zip(numbers, yaws)):
         number = _integer(number, f'unpublished.measurement[{i}]')
-        if number not in stored:
+        at = bisect.bisect_left(ms, number, key=lambda m: m.number)        # (numbers increase)
+        if at == len(ms) or ms[at].number != number:
             raise _fail(f'unpublished.measurement[{i}]', f'{number} is not a stored measurement')
-        unpublished.append((stored[number], _number(yaw, f'unpublished.yaw[{i}]', finite=False)))
+        unpublished.append((ms[at], _number(yaw, f'unpublished.yaw[{i}]', finite=False)))
 
     return Handover(measurements=ms, dedup=Dedup(newest_time, keys), unpublished=unpublished,
                     duplicates=_integer(_item(state, 'duplicates', 'duplicates'), 'duplicates', minimum=0),
-                    outside=_integer(_item(state, 'outside', 'outside'), 'outside', minimum=0))
+                    outside=_integer(_item(state, 'outside', 'outside'), 'outside', minimum=0), reused=reused)

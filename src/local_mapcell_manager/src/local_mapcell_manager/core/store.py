@@ -4,13 +4,15 @@ The store is a TSV file in the format of :mod:`cnr_maps.measurements` (the thesi
 one merged measurement per line, flushed and fsync'ed per line. On start the file is read back to rebuild
 every cell's state, so a restart loses nothing. A truncated last line (a crash while writing) is skipped with
 a warning and never truncated further: new lines start on a fresh line. The only rewrite (a migration's
-hand-over, :meth:`MeasurementStore.replace`) is atomic: a temporary file renamed over the store.
+hand-over) is atomic: a :class:`Draft` (a temporary file in the store's directory, written ahead, e.g. by a
+standby from the replicas it receives) is fsync'ed and renamed over the store.
 """
 from __future__ import annotations
 
 import contextlib
 import math
 import os
+import re
 import stat
 import tempfile
 from dataclasses import dataclass, field
@@ -141,31 +143,84 @@ class MeasurementStore:
             os.fsync(f.fileno())
 
     def replace(self, ms: Sequence[Measurement]) -> None:
-        """Rewrite the whole file with exactly these rows, atomically: they are written to a temporary file in
-        the same directory, fsync'ed and renamed over the store, so a crash leaves the old file or the new one,
-        never a truncated one.
+        """Rewrite the whole file with exactly these rows, atomically (a :class:`Draft` installed): a crash leaves
+        the old file or the new one, never a truncated one.
 
         Raises:
             OSError: the file could not be written (the old file is then unchanged).
         """
+        draft = Draft(self)
+        draft.append(ms)
+        draft.install()
+
+    def remove_stale_drafts(self) -> List[str]:
+        """Delete the drafts of this store left by processes that no longer run (a crash before installing or
+        discarding one); returns their paths."""
         directory = os.path.dirname(os.path.abspath(self.path))
-        fd, tmp = tempfile.mkstemp(prefix=os.path.basename(self.path) + '.', suffix='.tmp', dir=directory)
+        pattern = re.compile(re.escape(os.path.basename(self.path)) + r'\.draft-(\d+)-.*\.tmp$')
+        removed = []
+        for name in os.listdir(directory):
+            m = pattern.match(name)
+            if m and not os.path.exists(f'/proc/{m.group(1)}'):
+                with contextlib.suppress(OSError):
+                    os.unlink(os.path.join(directory, name))
+                    removed.append(os.path.join(directory, name))
+        return removed
+
+
+class Draft:
+    """The store's next content, written ahead into a temporary file next to it (``<store>.draft-<pid>-*.tmp``)
+    and installed over it atomically: rows appended without fsync (cheap while a standby follows the replicas),
+    everything fsync'ed once at :meth:`install`.
+
+    Raises (all methods):
+        OSError: the file could not be written; a failed draft is discarded (the store unchanged).
+    """
+
+    def __init__(self, store: MeasurementStore) -> None:
+        self.store = store
+        directory = os.path.dirname(os.path.abspath(store.path))
+        fd, self.path = tempfile.mkstemp(prefix=f'{os.path.basename(store.path)}.draft-{os.getpid()}-',
+                                         suffix='.tmp', dir=directory)
+        self.file = os.fdopen(fd, 'w')
+        self.rows = 0
         try:
-            with os.fdopen(fd, 'w') as f:
-                f.write(HEADER_LINE)
-                f.write(''.join(format_row(m) for m in ms))
-                f.flush()
-                os.fsync(f.fileno())
-            with contextlib.suppress(OSError):     # keep the old file's permissions (mkstemp makes it 0600)
-                os.chmod(tmp, stat.S_IMODE(os.stat(self.path).st_mode))
-            os.replace(tmp, self.path)
+            self.file.write(HEADER_LINE)
         except BaseException:
-            with contextlib.suppress(OSError):
-                os.unlink(tmp)
+            self.discard()
+            raise
+
+    def append(self, ms: Sequence[Measurement]) -> None:
+        try:
+            self.file.write(''.join(format_row(m) for m in ms))
+        except BaseException:
+            self.discard()
+            raise
+        self.rows += len(ms)
+
+    def install(self) -> None:
+        """The draft becomes the store (the old file's permissions kept); the draft is used up."""
+        path = self.store.path
+        directory = os.path.dirname(os.path.abspath(path))
+        try:
+            self.file.flush()
+            os.fsync(self.file.fileno())
+            self.file.close()
+            with contextlib.suppress(OSError):     # keep the old file's permissions (mkstemp makes it 0600)
+                os.chmod(self.path, stat.S_IMODE(os.stat(path).st_mode))
+            os.replace(self.path, path)
+        except BaseException:
+            self.discard()
             raise
         dir_fd = os.open(directory, os.O_RDONLY)
         try:
             os.fsync(dir_fd)                       # the rename itself survives a crash
         finally:
             os.close(dir_fd)
-        self._needs_newline = False
+        self.store._needs_newline = False
+
+    def discard(self) -> None:
+        with contextlib.suppress(OSError):
+            self.file.close()
+        with contextlib.suppress(OSError):
+            os.unlink(self.path)
