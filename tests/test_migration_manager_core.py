@@ -448,6 +448,48 @@ def test_the_control_plane_priority_is_given_per_thread():
     assert thread_nice(threading.get_native_id()) == main_nice and not warnings
 
 
+BOOST_SCRIPT = r"""
+import threading, time, sys
+from migration_manager.core.priority import Elevator, thread_nice
+from cnr_harness import wait_until
+gate, tids = threading.Event(), {}
+def worker(name):
+    tids[name] = threading.get_native_id()
+    gate.wait()
+e = Elevator(-5, lambda s: print('WARN', s))
+protocol = threading.Thread(target=lambda: (e.this_thread(), worker('protocol')))
+module = threading.Thread(target=worker, args=('module',))
+protocol.start(); module.start()
+wait_until(lambda: len(tids) == 2, 5, 'threads')
+main = threading.get_native_id()
+e.boost(0.4)
+during = {n: thread_nice(t) for n, t in tids.items()}
+during['main'] = thread_nice(main)
+late = threading.Thread(target=worker, args=('late',))          # created during the boost: inherits it
+late.start()
+wait_until(lambda: 'late' in tids, 5, 'late thread')
+during['late'] = thread_nice(tids['late'])
+e.boost(0.4)                                                    # extends it
+wait_until(lambda: thread_nice(main) == 0, 5, 'the boost over')
+after = {n: thread_nice(t) for n, t in tids.items()}
+after['main'] = thread_nice(main)
+print(sorted(during.items()), sorted(after.items()))
+gate.set()
+"""
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason='a negative nice value needs root (CAP_SYS_NICE)')
+def test_a_boost_gives_every_thread_the_control_nice_for_a_while_then_their_own_back(workspace):
+    """Elevator.boost (a promotion's promotion_boost), in a process of its own: every thread at the value, a
+    thread created meanwhile too; then each its own back, the protocol thread elevated for good stays."""
+    import subprocess
+    out = subprocess.run(['/usr/bin/python3', '-c', BOOST_SCRIPT], capture_output=True, text=True, timeout=60,
+                         env=dict(os.environ))
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip() == ("[('late', -5), ('main', -5), ('module', -5), ('protocol', -5)] "
+                                  "[('late', 0), ('main', 0), ('module', 0), ('protocol', -5)]"), out.stdout
+
+
 # ---------------------------------------------------------------------------- the configured rule
 def rule(workspace):
     from migration_manager.core.rule import PlacementRule, rule_from_section

@@ -14,7 +14,7 @@ import dataclasses
 import threading
 import time
 from collections import deque
-from typing import Any, Deque, Dict, List, Optional, Tuple
+from typing import Any, Callable, Deque, Dict, List, Optional, Tuple
 
 import numpy as np
 import rospy
@@ -94,6 +94,7 @@ class MoveBaseNode(Hooks):
         self.activated_at: Optional[float] = None   # monotonic time of the last activation, until its first command
         self.commanding = threading.Event()      # the first velocity command since the last activation went out
         self.openings = 0                        # outputs opened so far (the services belong to the last)
+        self.after_cycle: List[Callable[[], None]] = []   # a taken-over goal's announcements: after its first cycle
         self.server = TakeoverActionServer('move_base', MoveBaseAction, self._execute)
         self.tf_buffer = tf2_ros.Buffer()
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
@@ -464,6 +465,7 @@ class MoveBaseNode(Hooks):
 
     def _start_goal(self, target: PoseStamped) -> bool:
         """Validate and start a goal; abort it (and return False) if it is unusable."""
+        self._announce()                       # (a goal preempted before its first cycle)
         goal_id = self.server.current_goal.get_goal_id().id
         takeover = self.takeover_recovery.pop(goal_id, None)
         p, q = target.pose.position, target.pose.orientation
@@ -492,13 +494,15 @@ class MoveBaseNode(Hooks):
         with self.controller_lock:
             self.dwa.reset()
         goal.header.frame_id = self.global_frame
-        self._out(self.current_goal_pub, goal)
         if takeover is None:
+            self._out(self.current_goal_pub, goal)
             rospy.loginfo(f'move_base: new goal ({p.x:.2f}, {p.y:.2f}) in {self.global_frame}')
-        else:
-            rospy.loginfo(f'move_base: continuing goal {goal_id} ({p.x:.2f}, {p.y:.2f}) in {self.global_frame}, '
-                          f'taken over from the previous instance (next recovery {takeover[0]}, {takeover[1]}'
-                          f'{f", along its plan of {len(takeover[2])} poses" if takeover[2] else ""})')
+        else:   # the goal continues: its first velocity command before anything else goes out (the capped robot)
+            self.after_cycle.append(lambda: (
+                self._out(self.current_goal_pub, goal),
+                rospy.loginfo(f'move_base: continuing goal {goal_id} ({p.x:.2f}, {p.y:.2f}) in {self.global_frame}, '
+                              f'taken over from the previous instance (next recovery {takeover[0]}, {takeover[1]}'
+                              f'{f", along its plan of {len(takeover[2])} poses" if takeover[2] else ""})')))
         return True
 
     def _handed_over(self) -> bool:
@@ -511,12 +515,18 @@ class MoveBaseNode(Hooks):
         while self.server.is_active() and not rospy.core.is_shutdown_requested():
             time.sleep(0.01)
 
+    def _announce(self) -> None:
+        """What a taken-over goal's start held back until its first control cycle (see ``_start_goal``)."""
+        while self.after_cycle:
+            self.after_cycle.pop(0)()
+
     @quiet_at_shutdown
     def _execute(self, goal: MoveBaseGoal) -> None:
         """The action's execute callback: ``MoveBase::executeCb``."""
         try:
             self._run_goal(goal)
         finally:
+            self._announce()                   # (the goal ended before its first cycle)
             if self._handed_over():    # actionlib aborts a goal left active: return once it is released
                 self._leave_goal()
 
@@ -561,6 +571,9 @@ class MoveBaseNode(Hooks):
             result = self.core.cycle(rospy.get_time())
             elapsed = time.perf_counter() - start_wall
             self.control_times.append(elapsed)
+            if result.cmd is not None:                 # the command first, then what reports on it
+                self._publish_cmd(result.cmd)
+            self._announce()
             if result.pose is not None:
                 feedback = MoveBaseFeedback(base_position=pose_stamped(result.pose, self.global_frame,
                                                                        rospy.Time.now()))
@@ -571,8 +584,6 @@ class MoveBaseNode(Hooks):
                 self._publish_recovery_status(result)
             if result.outcome is None and self.pursuit is not None:
                 self._note_pursuit(self.pursuit[0])
-            if result.cmd is not None:
-                self._publish_cmd(result.cmd)
             if result.outcome is not None:
                 self.publish_zero()
                 conclude = self.server.set_succeeded if result.outcome.status == 'SUCCEEDED' else \

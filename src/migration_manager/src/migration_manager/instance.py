@@ -266,6 +266,7 @@ class ManagedInstance:
             if req.command in ('sleep', 'wake'):
                 return self._sleep_or_wake(req.command)
             if req.command == 'promote':
+                self.elevator.boost(self.cfg.promotion_boost)     # the hand-over's path crosses the node's threads
                 if self.dormant:
                     return InstanceControlResponse(ok=False, term=self.holder.term,
                                                    message='dormant: wake it first')

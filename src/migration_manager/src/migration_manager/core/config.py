@@ -43,6 +43,7 @@ class MigrationConfig:
     restart_delay: float
     log_dir: str
     control_nice: int            # nice value of the manager and of the instances' protocol threads (core.priority)
+    promotion_boost: float       # s every thread of a promoted instance runs at control_nice (0: none)
     bridge_poll_service: str     # this host's bridge's "poll now" service, called by an instance that became
                                  # active (its new registrations reach the other host at once); '' = none
 
@@ -110,6 +111,7 @@ def from_section(s: Section) -> MigrationConfig:
         restart_delay=agent.number('restart_delay', minimum=0.0),
         log_dir=os.path.abspath(os.path.expanduser(log_dir)),
         control_nice=s.integer('control_nice', minimum=-20, maximum=19),
+        promotion_boost=s.number('promotion_boost', minimum=0.0),
         bridge_poll_service=_service_name(s, 'bridge_poll_service'))
 
 
