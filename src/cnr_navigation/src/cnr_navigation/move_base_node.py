@@ -94,7 +94,7 @@ class MoveBaseNode(Hooks):
         self.activated_at: Optional[float] = None   # monotonic time of the last activation, until its first command
         self.commanding = threading.Event()      # the first velocity command since the last activation went out
         self.openings = 0                        # outputs opened so far (the services belong to the last)
-        self.after_cycle: List[Callable[[], None]] = []   # a taken-over goal's announcements: after its first cycle
+        self.announcement: Optional[Callable[[], None]] = None   # a taken-over goal's: after its first cycle
         self.server = TakeoverActionServer('move_base', MoveBaseAction, self._execute)
         self.tf_buffer = tf2_ros.Buffer()
         self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
@@ -498,11 +498,12 @@ class MoveBaseNode(Hooks):
             self._out(self.current_goal_pub, goal)
             rospy.loginfo(f'move_base: new goal ({p.x:.2f}, {p.y:.2f}) in {self.global_frame}')
         else:   # the goal continues: its first velocity command before anything else goes out (the capped robot)
-            self.after_cycle.append(lambda: (
-                self._out(self.current_goal_pub, goal),
+            def announce() -> None:
+                self._out(self.current_goal_pub, goal)
                 rospy.loginfo(f'move_base: continuing goal {goal_id} ({p.x:.2f}, {p.y:.2f}) in {self.global_frame}, '
                               f'taken over from the previous instance (next recovery {takeover[0]}, {takeover[1]}'
-                              f'{f", along its plan of {len(takeover[2])} poses" if takeover[2] else ""})')))
+                              f'{f", along its plan of {len(takeover[2])} poses" if takeover[2] else ""})')
+            self.announcement = announce
         return True
 
     def _handed_over(self) -> bool:
@@ -517,8 +518,9 @@ class MoveBaseNode(Hooks):
 
     def _announce(self) -> None:
         """What a taken-over goal's start held back until its first control cycle (see ``_start_goal``)."""
-        while self.after_cycle:
-            self.after_cycle.pop(0)()
+        announce, self.announcement = self.announcement, None
+        if announce is not None:
+            announce()
 
     @quiet_at_shutdown
     def _execute(self, goal: MoveBaseGoal) -> None:

@@ -275,8 +275,8 @@ class Ledger:
             if h.reused is not None:
                 book, draft = prepared.book, prepared.draft
                 prepared.release()                 # (its book and draft are this content's now)
-                content = _Content(self.grid, h.measurements[h.reused:], h.dedup, book=book)
                 added = h.measurements[h.reused:]
+                content = _Content(self.grid, added, h.dedup, book=book)
             else:
                 content = _Content(self.grid, h.measurements, h.dedup)
                 draft, added = None, h.measurements
@@ -379,7 +379,12 @@ class Prepared:
         comparison is mostly by identity.)"""
         n = len(self.measurements)
         return (self.columns is not None and
-                all(len(c) >= n and (c is p or c[:n] == p[:n]) for c, p in zip(columns, self.columns)))
+                all(len(c) >= n and (c is p or c[:n] == p) for c, p in zip(columns, self.columns)))
+
+    def rest(self, columns: List[List[Any]]) -> List[Measurement]:
+        """The rows of ``columns`` after the prepared ones, checked (``columns`` must fit)."""
+        return _parse_rows(columns, self.grid, len(self.measurements),
+                           self.measurements[-1].number if self.measurements else 0)
 
     def update(self, state: Any) -> int:
         """Follow a replica: prepare what it adds (everything, if it does not extend what was prepared).
@@ -388,8 +393,7 @@ class Prepared:
             columns = _columns(state)
             if not self.fits(columns):
                 self.discard()
-            new = _parse_rows(columns, self.grid, len(self.measurements),
-                              self.measurements[-1].number if self.measurements else 0)
+            new = self.rest(columns)
             if self.draft is None:
                 self.draft = Draft(self.store)
             self.draft.append(new)
@@ -505,8 +509,7 @@ def parse_state(state: Any, grid: MapcellGrid, prepared: Optional[Prepared] = No
     reused = None
     if prepared is not None and prepared.fits(columns):
         reused = len(prepared.measurements)
-        ms = prepared.measurements + _parse_rows(columns, grid, reused,
-                                                 prepared.measurements[-1].number if reused else 0)
+        ms = prepared.measurements + prepared.rest(columns)
     else:
         ms = _parse_rows(columns, grid, 0, 0)
 

@@ -183,7 +183,6 @@ class Draft:
         fd, self.path = tempfile.mkstemp(prefix=f'{os.path.basename(store.path)}.draft-{os.getpid()}-',
                                          suffix='.tmp', dir=directory)
         self.file = os.fdopen(fd, 'w')
-        self.rows = 0
         try:
             self.file.write(HEADER_LINE)
         except BaseException:
@@ -196,7 +195,6 @@ class Draft:
         except BaseException:
             self.discard()
             raise
-        self.rows += len(ms)
 
     def install(self) -> None:
         """The draft becomes the store (the old file's permissions kept); the draft is used up."""
