@@ -138,3 +138,24 @@ def test_a_link_that_collapses_during_the_task_brings_move_base_home_at_once(tmp
     waited = [float(w) for w in re.findall(r're-decided during the task: onload at .*?wanted for ([0-9.]+) s', out)]
     assert waited and waited[0] < decision['redecision']['dwell'], out[-3000:]     # the clear path, not the dwell
     assert 'Traceback' not in out
+
+
+def test_a_decision_asked_before_the_cloud_is_heard_waits_for_the_link(tmp_path):
+    """The session starts with the link cut for 15 s (as when the cloud's side and the bridge come up late on a
+    slow machine: seen once in CI, onload for want of a profile on a 1 ms link). The decider waits for the
+    network monitor to hear the cloud (``decider.link_wait``, 30 s), lets the window settle from then, and
+    decides by the k-NN on the link as it is — offload — not onload for want of an RTT."""
+    training, control = seed_training(tmp_path)
+    trace = tmp_path / 'late_link.tsv'
+    trace.write_text('time\tdirection\tdelay\trate\toutage\n0\tboth\t1\t0\ttrue\n15\tboth\t\t\tfalse\n')
+    plan = dict(task=TASK, location=LOCATION, settle=6.0, runs=[
+        dict(id='late', condition='late', force='', decide=True, learn=False, explore=False, reuse_profile=False)])
+    out, rows = run_session(tmp_path, plan, os.path.join(WS, 'config'), training, control,
+                            'network_aware_late_link.log', '--trace', str(trace))
+    assert [r['id'] for r in rows] == ['late'], out[-3000:]
+    row = rows[0]
+    assert (row['decision'], row['reason']) == (OFFLOAD, 'knn') and float(row['c_l']) < 0.05, (row, out[-3000:])
+    assert row['mission_status'] == COMPLETED and row['placement'] == 'move_base=cloud', row
+    heard = re.findall(r'decision: the cloud first heard ([0-9.]+) s after the request', out)
+    assert heard and float(heard[0]) > 1.0, out[-3000:]
+    assert 'Traceback' not in out

@@ -47,6 +47,8 @@ class DeciderNode:
         self.service_timeout = d.number('service_timeout', positive=True)
         self.placement_timeout = d.number('placement_timeout', positive=True)
         self.profile_at_home = d.boolean('profile_at_home')
+        self.link_wait = d.number('link_wait', positive=True)
+        self.alive_since: Optional[float] = None      # monotonic time the periodic profiles began to say alive
         self.last_profile: Optional[Tuple[Profile, str]] = None     # the previous ~decide's profile and its note
         self.advisor = TaskAdvisor(self.cfg)
         self.lock = threading.Lock()
@@ -74,6 +76,7 @@ class DeciderNode:
     def _on_profile(self, msg: NetworkProfile) -> None:
         now = time.monotonic()
         with self.lock:
+            self.alive_since = (self.alive_since or now) if msg.alive else None
             if self.migrating:
                 return
             switch = self.advisor.observe(profile_of(msg), now)
@@ -168,7 +171,8 @@ class DeciderNode:
         """The profile a ~decide decides on, and a note for its message (the package README, "Node
         migration_decider"): the previous one (``reuse_profile``), or a new one taken with the task's modules on
         the robot (``decider.profile_at_home``) no earlier than ``settle`` s after the request or, when modules
-        were brought home, after they were (their traffic filled the link's queue until then)."""
+        were brought home, after they were (their traffic filled the link's queue until then), or after the
+        network monitor began to hear the cloud (:meth:`_settle`)."""
         if req.reuse_profile and self.last_profile is not None:
             profile, note = self.last_profile
             return profile, note + 'the previous profile: '
@@ -184,8 +188,7 @@ class DeciderNode:
                 t0 = time.monotonic()   # their traffic may still be queued on the link: the window fills anew
                 if not placed:
                     rospy.logwarn(f'migration_decider: {home_note}')
-        while not rospy.is_shutdown() and time.monotonic() - t0 < req.settle:
-            time.sleep(0.1)
+        note += self._settle(t0, req.settle)
         try:
             res = self.profile_now(req.probe) if self._wait(self.profile_now) else None
         except (rospy.ServiceException, rospy.ROSException) as exc:
@@ -199,6 +202,32 @@ class DeciderNode:
             note += '' if res.success else f'probe failed ({res.message}): '
         self.last_profile = (profile, note)
         return profile, home_note + note
+
+    def _settle(self, t0: float, settle: float) -> str:
+        """Wait until ``settle`` s after ``t0`` *and* after the network monitor's periodic profiles began to say
+        the cloud answers, the latter at most ``decider.link_wait`` s from now (at a session's start the cloud's
+        side and the bridge may still be coming up: a profile taken then knows no RTT). If the cloud went silent
+        meanwhile it waits and settles anew, within the same bound. Returns a
+        note for the decision's message ('' when the cloud was heard at once)."""
+        start = time.monotonic()
+        deadline = start + self.link_wait
+        while not rospy.is_shutdown():
+            with self.lock:
+                since = self.alive_since
+            if since is None and time.monotonic() < deadline:
+                time.sleep(0.1)
+                continue
+            until = max(t0, since if since is not None else t0) + settle
+            while not rospy.is_shutdown() and time.monotonic() < until:
+                time.sleep(0.1)
+            with self.lock:
+                heard = self.alive_since
+            if heard != since and time.monotonic() < deadline:
+                continue                          # silent meanwhile: settle anew once heard, within the bound
+            if heard is None:
+                return f'the network monitor did not hear the cloud for {self.link_wait:g} s: '
+            return '' if heard <= start else f'the cloud first heard {heard - start:.1f} s after the request: '
+        return ''
 
     def _on_decide(self, req) -> DecideResponse:
         profile, note = self._profile(req)
