@@ -75,6 +75,33 @@ def test_standby_promotion_state_freeze_and_cut_off(gg):
     assert proc.alive()
 
 
+def test_a_standby_reports_the_replica_it_holds_and_answers_a_ping_without_its_state(gg):
+    """Before it freezes the source the manager waits (timeouts.replica) for the target standby to hold a replica
+    of it: the standby's status names whose replicas it holds and the newest. ``ping``, the manager's readiness
+    probe, answers ready without the state (``state`` encodes it: the whole store, for local_mapcell_manager)."""
+    from cnr_msgs.msg import ModuleState
+    from cnr_msgs.srv import InstanceControl
+    from migration_manager.core import state as codec
+    proc, driver = gg
+    st = driver.wait_standby(30)
+    assert (st.replica_of, st.replica_seq) == ('', 0)
+    control = rospy.ServiceProxy('/migration/global_goal_manager/robot/control', InstanceControl)
+    ping, state = control(command='ping'), control(command='state')
+    assert (ping.ok, ping.message, bytes(ping.state)) == (True, 'ready', b'') and len(state.state) > 0
+    pub = rospy.Publisher('/migration/global_goal_manager/state', ModuleState, queue_size=5)
+    try:
+        wait_until(lambda: pub.get_num_connections() > 0, 10, 'the standby to follow the replicas')
+        data = codec.encode('global_goal_manager', {'policy': 'coverage_sweep', 'policy_state': {'waypoint_index': 2},
+                                                    'last_goal': None})
+        pub.publish(ModuleState(module='global_goal_manager', instance='global_goal_manager@cloud', term=1, seq=7,
+                                base_seq=0, data=data))
+        st = wait_until(lambda: driver.status if driver.status.replica_seq else None, 5,
+                        'a status naming the replica held')
+        assert (st.role, st.replica_of, st.replica_seq) == ('standby', 'global_goal_manager@cloud', 7)
+    finally:
+        pub.unregister()
+
+
 def test_a_cut_off_instance_closes_its_outputs_and_a_bad_state_is_refused(gg):
     from cnr_msgs.srv import InstanceControl
     from migration_manager.core import state as codec

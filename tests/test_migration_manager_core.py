@@ -12,7 +12,7 @@ from migration_manager.core.lease import Answer, Grantor, Holder, TermFilter, in
 from migration_manager.core.plan import Migration, Step, Timeouts
 
 D, MARGIN = 0.6, 0.15
-TIMEOUTS = Timeouts(start=30.0, freeze=1.0, promote=3.0)
+TIMEOUTS = Timeouts(start=30.0, freeze=1.0, promote=3.0, replica=2.0)
 
 
 def grant(g: Grantor, h: Holder, t_request: float, t_grant: float, t_receive: float) -> None:
@@ -229,6 +229,23 @@ def test_hot_migration_with_a_ready_standby_freezes_at_once():
     assert m.begin(1.0, target_standby_ready=True) == [('freeze', 'robot', 1)]
 
 
+def test_a_ready_standby_without_a_replica_of_the_source_is_waited_for_a_bounded_time():
+    """A standby started moments ago (a hot migration back right after one there, or a cold clone) holds no
+    replica of the source yet: the freeze waits, at most timeouts.replica, until it does, so that the final state
+    comes as a patch to it and not whole (the store's thousands of measurements); past the bound it goes whole."""
+    m = Migration('mfg', 'robot', 'cloud', 'hot', TIMEOUTS, started(), 1.0)
+    assert m.begin(1.0, True, holds_replica=False) == [] and m.step is Step.STARTING
+    assert 'waiting for it to hold a replica of mfg@robot' in m.events[-1].message
+    assert m.target_ready(1.5, holds_replica=False) == []
+    assert m.target_ready(1.6, holds_replica=True) == [('freeze', 'robot', 1)] and m.step is Step.FREEZING
+    late = Migration('mfg', 'robot', 'cloud', 'cold', TIMEOUTS, started(), 1.0)
+    assert late.begin(1.0, False) == [('start_standby', 'cloud', None)]
+    assert late.target_ready(5.0, holds_replica=False) == []
+    assert late.target_ready(5.0 + TIMEOUTS.replica - 0.01, holds_replica=False) == []
+    assert late.target_ready(5.0 + TIMEOUTS.replica, holds_replica=False) == [('freeze', 'robot', 1)]
+    assert 'without a replica: the whole state goes' in late.events[-2].message
+
+
 def test_a_target_that_does_not_start_is_rolled_back_and_the_source_never_stopped():
     g = started()
     m = Migration('mfg', 'robot', 'cloud', 'cold', TIMEOUTS, g, 0.0)
@@ -270,7 +287,7 @@ def test_failover_skips_the_freeze_and_waits_for_the_lease():
     g.promote('mfg@cloud', 0.0)
     g.request('mfg@cloud', 1, 1, 10.0)
     m = Migration('mfg', 'cloud', 'robot', 'hot', TIMEOUTS, g, 10.61, failover=True)
-    assert m.begin(10.61, True) == []
+    assert m.begin(10.61, True, holds_replica=False) == []         # no freeze: no replica waited for
     assert m.step is Step.WAITING_LEASE
     assert m.tick(10.7) == []
     assert m.tick(10.75)[0][0] == 'promote'
@@ -302,7 +319,7 @@ def test_first_start_has_no_source():
     g = Grantor('mfg', D, MARGIN)
     m = Migration('mfg', '', 'robot', 'cold', TIMEOUTS, g, 0.0)
     m.begin(0.0, False)
-    assert m.target_ready(2.0) == [('promote', 'robot', (1, None))]
+    assert m.target_ready(2.0, holds_replica=False) == [('promote', 'robot', (1, None))]   # nothing to wait for
     assert m.target_active(2.1, 1) == [] and m.step is Step.DONE
 
 
@@ -420,6 +437,9 @@ def test_config_from_the_workspace_and_errors_name_the_field(workspace):
     bad = dict(data, control_nice=-21)
     with pytest.raises(ConfigError, match='control_nice'):
         from_section(Section(bad, 'config/migration.yaml'))
+    assert cfg.timeouts.replica >= 0
+    with pytest.raises(ConfigError, match='timeouts.replica'):
+        from_section(Section(dict(data, timeouts=dict(data['timeouts'], replica=-1.0)), 'config/migration.yaml'))
     del data['timeouts']
     with pytest.raises(ConfigError, match='timeouts'):
         from_section(Section(data, 'config/migration.yaml'))

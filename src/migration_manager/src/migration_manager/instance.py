@@ -215,8 +215,11 @@ class ManagedInstance:
         with self.lock:
             role = self._role()
         ready = role != 'dormant' and (role != 'standby' or bool(self.hooks.standby_ready()))
+        with self.replica_lock:
+            replica_of, replica_seq = self.replica.instance, self.replica.seq
         msg = InstanceStatus(module=self.module, instance=self.id, role=role, term=self.holder.term,
-                             ready=ready, pid=os.getpid(), message=self.message)
+                             ready=ready, pid=os.getpid(), message=self.message, replica_of=replica_of,
+                             replica_seq=replica_seq)
         # frozen: stamped with the moment the outputs were closed (a consumer measures the downtime from it)
         msg.header.stamp = rospy.Time.from_sec(self.frozen_wall if role == 'frozen' else time.time())
         self.status_pub.publish(msg)
@@ -240,10 +243,11 @@ class ManagedInstance:
     def _on_control(self, req) -> InstanceControlResponse:
         self.elevator.this_thread()
         try:
-            if req.command == 'state':
+            if req.command in ('state', 'ping'):
                 ready = not self.dormant and (self.holder.term > 0 or bool(self.hooks.standby_ready()))
                 return InstanceControlResponse(ok=True, message='ready' if ready else 'not ready',
-                                               term=self.holder.term, state=self._state_bytes())
+                                               term=self.holder.term,
+                                               state=self._state_bytes() if req.command == 'state' else b'')
             if req.command == 'freeze':
                 with self.lock:
                     if self.holder.term != req.term:
@@ -442,11 +446,14 @@ class ManagedInstance:
             return
         try:
             with self.replica_lock:
+                first = self.replica.instance != msg.instance
                 taken = self.replica.take(msg.instance, msg.seq, msg.base_seq, bytes(msg.data))
                 newest = self.replica.state
         except state_codec.StateError as exc:
             rospy.logwarn(f'{self.id}: replica {msg.seq} of {msg.instance} ignored: {exc}')
             return
+        if taken and first:
+            self._status()            # the manager waits for this before a migration here freezes the source
         if taken:
             with self.prepare_wake:
                 self.to_prepare = newest

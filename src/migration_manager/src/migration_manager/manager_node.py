@@ -196,9 +196,16 @@ class Manager:
         return call_with_timeout(proxy, self.cfg.control_call, *args)
 
     def _instance_up(self, module: str, host: str) -> bool:
-        """The instance answers and is ready (a standby's inputs are connected)."""
-        ok, res = self.control[(module, host)].call(command='state')
+        """The instance answers and is ready (a standby's inputs are connected). ``ping``, not ``state``: a
+        store standby would encode its whole store for every probe, on the capped robot."""
+        ok, res = self.control[(module, host)].call(command='ping')
         return ok and res.ok and res.message != 'not ready'
+
+    def _holds_replica(self, book: ModuleBook, host: str, source: str) -> bool:
+        """The standby on ``host`` reports that it holds a replica of the instance active on ``source``."""
+        st = book.status.get(host)
+        return bool(source) and st is not None and st.replica_of == instance_id(book.module, source) \
+            and st.replica_seq > 0
 
     # ------------------------------------------------------------------ migrations
     def _event(self, mid: int, m: Migration, message: str, at: Optional[float] = None) -> None:
@@ -234,7 +241,7 @@ class Manager:
         try:
             ready = self._instance_up(module, target) and self._standby(book, target)
             with self.lock:
-                actions = m.begin(time.monotonic(), ready)
+                actions = m.begin(time.monotonic(), ready, self._holds_replica(book, target, m.source))
             while True:
                 while actions:                       # an action's outcome may call for more actions
                     verb, host, detail = actions.pop(0)
@@ -270,7 +277,7 @@ class Manager:
             finally:
                 self.lock.acquire()
             if up:
-                return m.target_ready(time.monotonic())
+                return m.target_ready(time.monotonic(), self._holds_replica(book, m.target, m.source))
         if m.step is Step.STARTING:
             state, pid = self.health.get(m.target, {}).get(m.module, ('', 0))
             if state.startswith('exited') and pid and pid == run.agent_pid:

@@ -93,7 +93,7 @@ def from_section(s: Section) -> MigrationConfig:
                                           f'got {ls.renew_period:g}')
     t = s.section('timeouts')
     timeouts = Timeouts(start=t.number('start', positive=True), freeze=t.number('freeze', positive=True),
-                        promote=t.number('promote', positive=True))
+                        promote=t.number('promote', positive=True), replica=t.number('replica', minimum=0.0))
     agent = s.section('agent')
     log_dir = agent.string('log_dir')
     if not log_dir:

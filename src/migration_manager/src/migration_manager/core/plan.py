@@ -11,7 +11,9 @@ instance comes from:
 - **hot** (method 2, the hibernating proxy, the thesis's future work): the standby already runs on the target,
   its state replicated continuously; the source becomes the standby when it is done.
 
-Steps: ``STARTING`` (cold: wait for the target standby to be ready) → ``FREEZING`` (the source closes its outputs
+Steps: ``STARTING`` (cold: wait for the target standby to be ready; hot and cold: and, at most
+``timeouts.replica``, for it to hold a replica of the source, so that the final state can come as a patch to
+it) → ``FREEZING`` (the source closes its outputs
 for good and returns its final state; the lease is released) → ``PROMOTING`` (the target restores that state,
 replays what it buffered, and is active once its first lease renewal is granted) → ``DONE`` (the source is
 stopped or goes back to standby). If the source cannot be reached to freeze it (cut off), the target is promoted
@@ -55,6 +57,8 @@ class Timeouts:
     start: float                 # [s] a cold target standby must be ready within this
     freeze: float                # [s] the source must answer the freeze within this (else: treated as cut off)
     promote: float               # [s] the target must be active within this after the promotion order
+    replica: float               # [s] a ready target standby that holds no replica of the source yet is waited
+                                 #   for this long (the freeze then hands over a patch, not the whole state)
 
 
 @dataclass
@@ -86,6 +90,7 @@ class Migration:
     events: List[Event] = field(default_factory=list)
     error: str = ''
     woken: bool = False                    # the target standby was a dormant instance woken, not a clone
+    replica_wait: Optional[float] = None   # until when a ready target is waited for to hold a replica
 
     def __post_init__(self) -> None:
         if self.mode not in MODES:
@@ -115,20 +120,34 @@ class Migration:
         return self.active_at - self.frozen_at
 
     # ------------------------------------------------------------------ events
-    def begin(self, now: float, target_standby_ready: bool) -> List[Action]:
-        """Start: a hot migration with a ready standby freezes at once; otherwise a standby is started."""
-        if target_standby_ready:
-            self._note(now, f'standby on {self.target} is ready')
-            return self._freeze(now)
+    def begin(self, now: float, target_standby_ready: bool, holds_replica: bool = True) -> List[Action]:
+        """Start: a hot migration with a ready standby freezes at once (once it holds a replica of the source,
+        see :meth:`target_ready`); otherwise a standby is started."""
         self.step = Step.STARTING
         self.deadline = now + self.timeouts.start
+        if target_standby_ready:
+            return self.target_ready(now, holds_replica)
         self._note(now, f'starting a standby on {self.target}')
         return [('start_standby', self.target, None)]
 
-    def target_ready(self, now: float) -> List[Action]:
+    def target_ready(self, now: float, holds_replica: bool = True) -> List[Action]:
+        """The target standby is ready. The freeze waits, at most ``timeouts.replica``, until the standby also
+        holds a replica of the source (``holds_replica``; a standby started moments ago has none yet): the final
+        state then comes as a patch to it, not whole (thousands of measurements for the store). Not waited for
+        without a source to freeze or in a failover (no freeze: the last replicated state goes)."""
         if self.step is not Step.STARTING:
             return []
-        self._note(now, f'standby on {self.target} is ready')
+        if not holds_replica and self.source and not self.failover:
+            if self.replica_wait is None:
+                self.replica_wait = now + self.timeouts.replica
+                if self.timeouts.replica > 0:
+                    self._note(now, f'standby on {self.target} is ready; waiting for it to hold a replica of '
+                                    f'{instance_id(self.module, self.source)} (at most {self.timeouts.replica:g} s)')
+            if now < self.replica_wait:
+                return []
+            self._note(now, f'standby on {self.target} is ready (without a replica: the whole state goes)')
+        else:
+            self._note(now, f'standby on {self.target} is ready')
         return self._freeze(now)
 
     def _freeze(self, now: float) -> List[Action]:
