@@ -77,10 +77,11 @@ def test_standby_promotion_state_freeze_and_cut_off(gg):
 
 def test_a_standby_reports_the_replica_it_holds_and_answers_a_ping_without_its_state(gg):
     """Before it freezes the source the manager waits (timeouts.replica) for the target standby to hold a replica
-    of it: the standby's status names whose replicas it holds and the newest. ``ping``, the manager's readiness
-    probe, answers ready without the state (``state`` encodes it: the whole store, for local_mapcell_manager)."""
+    of it: the standby's status names whose replicas it holds and the newest; a standby that gets patches to a
+    replica it does not hold asks the active instance for a whole one. ``ping``, the manager's readiness probe,
+    answers ready without the state (``state`` encodes it: the whole store, for local_mapcell_manager)."""
     from cnr_msgs.msg import ModuleState
-    from cnr_msgs.srv import InstanceControl
+    from cnr_msgs.srv import InstanceControl, InstanceControlResponse
     from migration_manager.core import state as codec
     proc, driver = gg
     st = driver.wait_standby(30)
@@ -88,9 +89,16 @@ def test_a_standby_reports_the_replica_it_holds_and_answers_a_ping_without_its_s
     control = rospy.ServiceProxy('/migration/global_goal_manager/robot/control', InstanceControl)
     ping, state = control(command='ping'), control(command='state')
     assert (ping.ok, ping.message, bytes(ping.state)) == (True, 'ready', b'') and len(state.state) > 0
+    asked = []                                   # the cloud instance's control service, as the standby sees it
+    cloud = rospy.Service('/migration/global_goal_manager/cloud/control', InstanceControl,
+                          lambda req: asked.append(req.command) or InstanceControlResponse(ok=True))
     pub = rospy.Publisher('/migration/global_goal_manager/state', ModuleState, queue_size=5)
     try:
         wait_until(lambda: pub.get_num_connections() > 0, 10, 'the standby to follow the replicas')
+        # a patch to a replica it does not hold (its subscription connected after the whole state): it asks for one
+        pub.publish(ModuleState(module='global_goal_manager', instance='global_goal_manager@cloud', term=1, seq=6,
+                                base_seq=5, data=codec.encode_patch('global_goal_manager', 5, {'last_goal': 3})))
+        wait_until(lambda: 'keyframe' in asked, 10, 'a keyframe request to the cloud instance')
         data = codec.encode('global_goal_manager', {'policy': 'coverage_sweep', 'policy_state': {'waypoint_index': 2},
                                                     'last_goal': None})
         pub.publish(ModuleState(module='global_goal_manager', instance='global_goal_manager@cloud', term=1, seq=7,
@@ -100,6 +108,7 @@ def test_a_standby_reports_the_replica_it_holds_and_answers_a_ping_without_its_s
         assert (st.role, st.replica_of, st.replica_seq) == ('standby', 'global_goal_manager@cloud', 7)
     finally:
         pub.unregister()
+        cloud.shutdown()
 
 
 def test_a_cut_off_instance_closes_its_outputs_and_a_bad_state_is_refused(gg):

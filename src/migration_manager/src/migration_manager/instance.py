@@ -16,7 +16,8 @@ manager (``~migration/role`` empty or absent: every single-master and fixed-plac
 - superseded (a newer term or another holder announced) or frozen: outputs closed for good (``on_frozen``);
   a superseded instance shuts its node down (its agent starts a fresh standby if one is wanted here);
 - dormant (``sleep``, a frozen instance the manager keeps on its host instead of stopping it, for modules that
-  implement ``on_sleep``): inputs closed too, no requests, nothing but its status; ``wake`` makes it a standby
+  implement ``on_sleep``): inputs closed too, no requests, nothing but its status and its copy of the active
+  instance's replicas (so that, woken, it is promoted with a patch at once); ``wake`` makes it a standby
   again (``on_wake``), which the next migration to this host promotes instead of starting a clone;
 - the active instance publishes its state every ``replicate_period`` on ``/migration/<module>/state``
   (``replicate_period_authority`` on the manager's host): a whole state every ``replicate_keyframe_every``
@@ -168,6 +169,7 @@ class ManagedInstance:
         self.replica = state_codec.Replica(module)     # the active instance's newest replicas (as a standby)
         self.replica_lock = threading.Lock()
         self.keyframe_asked = -1e9             # monotonic time of this standby's last keyframe request
+        self.keyframe_missing = ('', 0)        # (instance, replica seq) when a patch without its base last made it ask
         self.renew_pub = rospy.Publisher(topic(module, 'renew'), MigrationRenew, queue_size=10)
         self.state_pub = rospy.Publisher(topic(module, 'state'), ModuleState, queue_size=2)
         self.status_pub = rospy.Publisher(topic(module, f'{self.host}/status'), InstanceStatus, queue_size=5,
@@ -331,6 +333,7 @@ class ManagedInstance:
                                      heard=old.heard)
                 self.was_active = False
                 self.message = 'dormant (retired here; woken by the next migration to this host)'
+                self._follow_replicas(True)
             else:
                 self.dormant = False
                 self.message = 'standby (woken)'
@@ -440,8 +443,9 @@ class ManagedInstance:
     def _on_replica(self, msg: ModuleState) -> None:
         if msg.instance == self.id:
             return
-        with self.lock:
-            standby = self.holder.term == 0 and not self.frozen and not self.dormant
+        with self.lock:      # a dormant instance keeps them too: woken, it is promotable with a patch at once
+            standby = self.holder.term == 0 and not self.frozen
+            dormant = self.dormant
         if not standby:
             return
         try:
@@ -452,9 +456,11 @@ class ManagedInstance:
         except state_codec.StateError as exc:
             rospy.logwarn(f'{self.id}: replica {msg.seq} of {msg.instance} ignored: {exc}')
             return
+        if not taken and not dormant:
+            self._keyframe_missing(msg.instance, msg.seq)
         if taken and first:
             self._status()            # the manager waits for this before a migration here freezes the source
-        if taken:
+        if taken and not dormant:
             with self.prepare_wake:
                 self.to_prepare = newest
                 self.prepare_wake.notify()
@@ -486,6 +492,21 @@ class ManagedInstance:
             if self.replica.seq_of(holder):
                 return
         self.keyframe_asked = now
+        self._request_keyframe(holder)
+
+    def _keyframe_missing(self, instance: str, seq: int) -> None:
+        """Replicas of ``instance`` arrive but are patches to one this standby does not hold: ask for a whole
+        state, and again when two more came since the last request without one (a whole state sent before this
+        standby's subscription had connected is never seen: a woken instance subscribed anew waited for its next
+        request, ``timeouts.control_call`` later, and missed every migration's ``timeouts.replica``)."""
+        with self.replica_lock:
+            if self.keyframe_missing[0] == instance and seq <= self.keyframe_missing[1] + 2:
+                return
+            self.keyframe_missing = (instance, seq)
+        self.keyframe_asked = time.monotonic()
+        self._request_keyframe(instance)
+
+    def _request_keyframe(self, holder: str) -> None:
         name = topic(self.module, f'{host_of(holder)}/control')
 
         def call() -> None:
