@@ -336,8 +336,7 @@ class ManagedInstance:
                 self._follow_replicas(True)
             else:
                 self.dormant = False
-                self.message = 'standby (woken)'
-                self._follow_replicas(True)
+                self.message = 'standby (woken)'       # (it kept following the replicas while dormant)
         rospy.loginfo(f'{self.id}: {self.message}')
         self._status()
         self.wake.set()

@@ -217,7 +217,7 @@ class DeciderNode:
             if since is None and time.monotonic() < deadline:
                 time.sleep(0.1)
                 continue
-            until = max(t0, since if since is not None else t0) + settle
+            until = max(t0, since or t0) + settle
             while not rospy.is_shutdown() and time.monotonic() < until:
                 time.sleep(0.1)
             with self.lock:
