@@ -103,6 +103,10 @@ def test_a_good_link_offloads_and_a_bad_one_onloads_by_knn(tmp_path):
     assert len(learned) == 18 and [r.decision for r in learned[15:]] == [OFFLOAD, ONLOAD, OFFLOAD]
     # B_task from the simulated battery: a few thousandths of a full battery (thesis CB 0.0046 for 88 s)
     assert all(0.0005 < float(r['b_task']) < 0.02 for r in rows[:2]), rows
+    # each managed instance's log is kept with the session's report (not in a directory every run shares)
+    instances = tmp_path / 'session' / 'logs' / 'instances'
+    assert sorted(instances.glob('cloud-move_base-*.log')) and sorted(instances.glob('robot-move_base-*.log')), \
+        sorted(p.name for p in instances.glob('*')) if instances.exists() else f'no {instances}'
     assert 'Traceback' not in out
 
 

@@ -247,7 +247,9 @@ class TwoHostMission:
             if self.migration:
                 start = {m: self.placement.host(m) for m in self.placement.managed}
                 host_args += ['migration:=true', 'migration_placement:=' + json.dumps(start),
-                              f'migration_rule:={str(self.rule).lower()}']
+                              f'migration_rule:={str(self.rule).lower()}',
+                              # kept with the report (the default directory is shared by every run)
+                              f'migration_log_dir:={os.path.join(self.log_dir, "instances")}']
             if side.side == 'robot':
                 host_args.append('kestrel_driver:=true')
             elif self.placement.host('move_base') == 'cloud' or 'move_base' in self.placement.managed:
