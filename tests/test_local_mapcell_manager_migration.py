@@ -296,6 +296,47 @@ def test_a_lapsed_lease_holds_the_output_back_and_the_service_refuses(lmm, ros):
     assert proc.alive() and 'Traceback' not in proc.output()
 
 
+def test_a_standby_names_a_replica_in_its_status_only_once_it_prepared_it(ros, workspace, tmp_path):
+    """A migration here waits (timeouts.replica) until the standby's status names a replica of the source; for
+    the store that must mean the replica was prepared (filed and drafted ahead), or the promotion waits for a
+    prepare still running (0.4 s on the capped robot, bench_migration.sh session 22). A replica whose draft
+    cannot be written (the store's directory gone) is not named; the next one, prepared, is."""
+    import shutil
+    from cnr_msgs.msg import ModuleState
+    from migration_driver import LeaseDriver
+    from migration_manager.core import state as codec
+    store_dir = tmp_path / 'store'
+    store_dir.mkdir()
+    ros.master.call('setParam', f'/{MODULE}', node_params(workspace, store_dir / 'robot.tsv', 'robot'))
+    driver = LeaseDriver(MODULE, 'robot')
+    pub = rospy.Publisher(f'/migration/{MODULE}/state', ModuleState, queue_size=5)
+    proc = ros.master.run(['rosrun', MODULE, MODULE], 'lmm_prepare')
+    try:
+        st = driver.wait_standby(30)
+        assert (st.replica_of, st.replica_seq) == ('', 0)
+        whole = codec.encode(MODULE, driver.state())           # a store's state (its own, empty), as the cloud's
+        wait_until(lambda: pub.get_num_connections() > 0, 10, 'the standby to follow the replicas')
+        shutil.rmtree(store_dir)                                # no draft can be written next to the store now
+        cloud = f'{MODULE}@cloud'
+        pub.publish(ModuleState(module=MODULE, instance=cloud, term=1, seq=5, base_seq=0, data=whole))
+        wait_until(lambda: 'replica not prepared' in proc.output(), 10, 'the prepare to fail')
+        seen = []
+        wait_until(lambda: seen.append(driver.status) or len({id(s) for s in seen}) >= 3, 10,
+                   'two more statuses after the failed prepare')
+        assert all(s.replica_seq == 0 for s in seen[1:]), [(s.replica_of, s.replica_seq) for s in seen]
+        store_dir.mkdir()
+        pub.publish(ModuleState(module=MODULE, instance=cloud, term=1, seq=6, base_seq=0, data=whole))
+        st = wait_until(lambda: driver.status if driver.status.replica_seq else None, 10,
+                        'a status naming the prepared replica')
+        assert (st.role, st.replica_of, st.replica_seq) == ('standby', cloud, 6)
+        assert proc.alive() and 'Traceback' not in proc.output()
+    finally:
+        pub.unregister()
+        ros.master.stop_child(proc)
+        driver.close()
+        ros.master.call('deleteParam', f'/{MODULE}')
+
+
 class Feed:
     """The real merger's inputs: ground-truth poses at 20 Hz and temperatures at 5 Hz (stamps from 1000 s on,
     0.05 s apart: the session's master has sim time and no clock here), along the corridor's cells; records
