@@ -221,7 +221,8 @@ class ManagedInstance:
         with self.lock:
             role = self._role()
         ready = role != 'dormant' and (role != 'standby' or bool(self.hooks.standby_ready()))
-        with self.replica_lock:       # a node that prepares replicas: the newest prepared (README "Waiting ...")
+        # a node that prepares replicas names the newest prepared (package README, "Waiting for a replica")
+        with self.replica_lock:
             replica_of, replica_seq = self.prepared if self.prepares else (self.replica.instance, self.replica.seq)
         msg = InstanceStatus(module=self.module, instance=self.id, role=role, term=self.holder.term,
                              ready=ready, pid=os.getpid(), message=self.message, replica_of=replica_of,
