@@ -105,3 +105,50 @@ def test_catkin_lint_reports_no_errors_or_warnings() -> None:
     r = subprocess.run([exe, '-W1', '--strict', SRC], capture_output=True, text=True, timeout=120)
     problems = [line for line in (r.stdout + r.stderr).splitlines() if ': error:' in line or ': warning:' in line]
     assert r.returncode == 0 and not problems, '\n'.join(problems) or r.stderr
+
+
+def _callbacks_that_publish(path: str):
+    """(class.method, decorators) for each method of a class in ``path`` that rospy calls back (a Subscriber's or
+    message_filters' callback, a Service handler) and that publishes, directly or through the class's own
+    methods."""
+    with open(path, encoding='utf-8') as stream:
+        tree = ast.parse(stream.read(), path)
+    for cls in (n for n in ast.walk(tree) if isinstance(n, ast.ClassDef)):
+        methods = {f.name: f for f in cls.body if isinstance(f, (ast.FunctionDef, ast.AsyncFunctionDef))}
+
+        def self_calls(fn):
+            return {c.func.attr for c in ast.walk(fn) if isinstance(c, ast.Call) and isinstance(c.func, ast.Attribute)
+                    and isinstance(c.func.value, ast.Name) and c.func.value.id == 'self' and c.func.attr in methods}
+
+        publishes = {name for name, fn in methods.items()
+                     if any(isinstance(c, ast.Call) and isinstance(c.func, ast.Attribute) and c.func.attr == 'publish'
+                            for c in ast.walk(fn))}
+        grown = True
+        while grown:
+            more = {name for name, fn in methods.items() if self_calls(fn) & publishes} - publishes
+            publishes |= more
+            grown = bool(more)
+        registered = set()
+        for call in (c for c in ast.walk(cls) if isinstance(c, ast.Call)):
+            name = call.func.attr if isinstance(call.func, ast.Attribute) else getattr(call.func, 'id', '')
+            if name in ('Subscriber', 'Service', 'registerCallback'):
+                for arg in call.args:
+                    if isinstance(arg, ast.Attribute) and isinstance(arg.value, ast.Name) and arg.value.id == 'self':
+                        registered.add(arg.attr)
+        for name in sorted(registered & publishes):
+            yield f'{cls.name}.{name}', [ast.unparse(d) for d in methods[name].decorator_list]
+
+
+def test_every_callback_that_publishes_is_quiet_at_shutdown():
+    """A subscriber callback or service handler that publishes can meet a topic the shutdown just closed
+    (``publish() to a closed topic``); rospy would log that with a traceback at every mission's end (seen in CI
+    with the merger). Each such callback is wrapped in ``cnr_params.ros.quiet_at_shutdown``."""
+    bare = []
+    for pkg_dir in PACKAGES.values():
+        for dirpath, _dirs, files in os.walk(os.path.join(pkg_dir, 'src')):
+            for f in (f for f in files if f.endswith('.py')):
+                path = os.path.join(dirpath, f)
+                for method, decorators in _callbacks_that_publish(path):
+                    if 'quiet_at_shutdown' not in decorators:
+                        bare.append(f'{os.path.relpath(path, WS)}: {method}')
+    assert not bare, bare

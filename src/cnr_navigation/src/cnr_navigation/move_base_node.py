@@ -435,6 +435,7 @@ class MoveBaseNode(Hooks):
     def _on_odom(self, msg: Odometry) -> None:
         self.velocity = (msg.twist.twist.linear.x, msg.twist.twist.angular.z)
 
+    @quiet_at_shutdown
     def _on_simple_goal(self, msg: PoseStamped) -> None:
         rospy.logdebug('In ROS goal callback, wrapping the PoseStamped in the action message and re-sending to '
                        'the server.')

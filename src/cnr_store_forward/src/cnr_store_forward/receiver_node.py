@@ -19,7 +19,7 @@ import rospy
 
 from cnr_msgs.msg import StoreForwardAck, StoreForwardBatch, StoreForwardStatus
 from cnr_params import exit_on_config_error
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import init_node, private_section, quiet_at_shutdown
 from cnr_store_forward.core import config as sf_config
 from cnr_store_forward.core.receiver import Receiver
 from cnr_store_forward.wire import RELAY_HEADER, raw_message, raw_message_class, ros_time
@@ -66,6 +66,7 @@ class ReceiverNode:
                               f'{kind[0]} ({kind[1]}); republishing without one')
         return self.out_pub
 
+    @quiet_at_shutdown
     def on_batch(self, batch: StoreForwardBatch) -> None:
         if batch.stream != self.cfg.common.stream or not batch.type:
             return

@@ -66,6 +66,7 @@ class GoalManagerNode(Hooks):
         with self.lock:
             self.states = msg
 
+    @quiet_at_shutdown
     def _next_goal(self, req) -> NextGoalResponse:
         if not self.instance.active:
             return NextGoalResponse(success=False, message='not the active instance (lease lapsed)',

@@ -16,7 +16,7 @@ from cnr_maps.pose import quaternion_to_yaw
 from cnr_msgs.msg import MergedMeasurement
 from cnr_msgs.srv import GetRecentMeasurements, GetRecentMeasurementsResponse
 from cnr_params import Section
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import init_node, private_section, quiet_at_shutdown
 from merger.core.nearest import NearestMerger
 from merger.core.retention import Retention
 
@@ -58,6 +58,7 @@ class MergerNode:
         self.temp_sub.registerCallback(self._on_temperature)
         rospy.Timer(rospy.Duration(0.1), lambda _e: self._flush())
 
+    @quiet_at_shutdown
     def _on_pose(self, msg: Odometry) -> None:
         p = msg.pose.pose
         values = (p.position.x, p.position.y, msg.header.stamp.to_sec())
@@ -71,6 +72,7 @@ class MergerNode:
             self.core.add_pose(msg.header.stamp.to_sec(), (p.position.x, p.position.y, yaw))
         self._flush()
 
+    @quiet_at_shutdown
     def _on_temperature(self, msg: Temperature) -> None:
         if not math.isfinite(msg.temperature) or msg.header.stamp.is_zero():
             rospy.logwarn_throttle(5.0, f'ignored a measurement with temperature {msg.temperature} '

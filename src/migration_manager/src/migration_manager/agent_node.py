@@ -25,7 +25,7 @@ from cnr_harness.process import Proc, stop_process
 from cnr_msgs.msg import AgentHealth
 from cnr_msgs.srv import AgentCommand, AgentCommandResponse
 from cnr_params.config import EXIT_CONFIG
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import init_node, private_section, quiet_at_shutdown
 from migration_manager.core.config import from_section
 from migration_manager.instance_launch import LaunchError, NodeLaunch, resolve
 
@@ -92,6 +92,7 @@ class Agent:
         slot.exited_at = None
         rospy.loginfo(f'{slot.module}: started a standby (pid {slot.proc.pid}, log {log})')
 
+    @quiet_at_shutdown
     def _on_command(self, req) -> AgentCommandResponse:
         slot = self.slots.get(req.module)
         if slot is None:

@@ -43,7 +43,7 @@ import rospy
 
 from cnr_msgs.msg import InstanceStatus, MigrationLease, MigrationRenew, ModuleState
 from cnr_msgs.srv import InstanceControl, InstanceControlResponse
-from cnr_params.ros import call_with_timeout, distinct_callerid, private_section
+from cnr_params.ros import call_with_timeout, distinct_callerid, private_section, quiet_at_shutdown
 from std_srvs.srv import Empty
 from migration_manager.core import state as state_codec
 from migration_manager.core.config import MigrationConfig, from_section
@@ -247,6 +247,7 @@ class ManagedInstance:
             term = self.holder.term
         self.renew_pub.publish(MigrationRenew(module=self.module, instance=self.id, term=term, nonce=nonce))
 
+    @quiet_at_shutdown
     def _on_control(self, req) -> InstanceControlResponse:
         self.elevator.this_thread()
         try:
@@ -448,6 +449,7 @@ class ManagedInstance:
             self.replica_sub.unregister()
             self.replica_sub = None
 
+    @quiet_at_shutdown
     def _on_replica(self, msg: ModuleState) -> None:
         if msg.instance == self.id:
             return

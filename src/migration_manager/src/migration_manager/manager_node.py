@@ -17,7 +17,7 @@ import rospy
 import cnr_params
 from cnr_msgs.msg import AgentHealth, InstanceStatus, MigrationEvent, MigrationLease, MigrationRenew, ModuleState, Placement
 from cnr_msgs.srv import AgentCommand, InstanceControl, Migrate, MigrateResponse
-from cnr_params.ros import call_with_timeout, init_node, private_section
+from cnr_params.ros import call_with_timeout, init_node, private_section, quiet_at_shutdown
 from migration_manager.core import state as state_codec
 from migration_manager.core.config import from_section
 from migration_manager.core.priority import Elevator
@@ -136,6 +136,7 @@ class Manager:
         self.lease_pubs[a.module].publish(MigrationLease(module=a.module, term=a.term, holder=a.holder,
                                                          nonce=a.nonce, granted=a.granted, duration=a.duration))
 
+    @quiet_at_shutdown
     def _on_renew(self, msg: MigrationRenew) -> None:
         book = self.books.get(msg.module)
         if book is None:
@@ -369,6 +370,7 @@ class Manager:
             self._call(self.agents[host], 'stop', m.module)
         return []
 
+    @quiet_at_shutdown
     def _on_migrate(self, req) -> MigrateResponse:
         started = time.monotonic()
         if req.module not in self.books:

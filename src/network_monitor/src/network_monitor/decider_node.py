@@ -24,7 +24,7 @@ import cnr_params
 from cnr_msgs.msg import NetworkProfile, Placement, TaskDecision
 from cnr_msgs.srv import (Decide, DecideResponse, EvaluateTask, EvaluateTaskResponse, Migrate, ProfileNow)
 from cnr_params import ConfigError, Section
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import init_node, private_section, quiet_at_shutdown
 from network_monitor.core.advisor import REDECISION, AdvisorError, Profile, RunningTask, TaskAdvisor
 from network_monitor.core.decision import Decision
 from network_monitor.core.decision_config import decision_config
@@ -229,6 +229,7 @@ class DeciderNode:
             return '' if heard <= start else f'the cloud first heard {heard - start:.1f} s after the request: '
         return ''
 
+    @quiet_at_shutdown
     def _on_decide(self, req) -> DecideResponse:
         profile, note = self._profile(req)
         with self.lock:
@@ -258,6 +259,7 @@ class DeciderNode:
         self.pub.publish(out)
         return DecideResponse(ok=True, message=out.message, decision=out)
 
+    @quiet_at_shutdown
     def _on_evaluate(self, req) -> EvaluateTaskResponse:
         with self.lock:
             running = self.advisor.running

@@ -21,7 +21,7 @@ from std_msgs.msg import Header
 from cnr_msgs.msg import LinkQuality, NetworkProfile
 from cnr_msgs.srv import ProfileNow, ProfileNowResponse
 from cnr_params import exit_on_config_error
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import init_node, private_section, quiet_at_shutdown
 from network_monitor.core import config as monitor_config
 from network_monitor.core.echo import EchoStats, LinkSample, link_state
 from network_monitor.core.estimate import BandwidthEstimator, r_bw
@@ -101,6 +101,7 @@ class Monitor:
         with self.lock:
             self.echo.reply(msg.seq, time.monotonic())
 
+    @quiet_at_shutdown
     def on_peer_ping(self, msg: Header) -> None:
         self.echo_pub.publish(msg)
 
