@@ -163,6 +163,23 @@ def test_a_goal_taken_over_continues_its_recovery_sequence(restored, expected):
     assert first_recovery(c, 0.0) == expected
 
 
+def test_a_goal_taken_over_is_not_checked_again():
+    """The instance that accepted the goal checked it; the check reads the global costmap and so waits for an update
+    in progress (on the capped robot before the taken-over goal's first command). A new goal is still checked."""
+    checked = []
+
+    class Counting(Backend):
+        def check_goal(self, goal):
+            checked.append((goal.x, goal.y))
+
+    c = core()
+    c.backend = Counting()
+    assert c.new_goal(4.0, 0.0, yaw_to_quaternion(0.0), now=0.0, checked=True) is None
+    assert checked == []
+    assert c.new_goal(5.0, 0.0, yaw_to_quaternion(0.0), now=1.0) is None
+    assert checked == [(5.0, 0.0)]
+
+
 def test_restore_recovery_refuses_what_this_instance_does_not_have():
     c = core()
     with pytest.raises(ValueError, match='recovery_index 4'):

@@ -11,6 +11,7 @@ once and leaves the goal to the next instance without a terminal status.
 from __future__ import annotations
 
 import dataclasses
+import math
 import threading
 import time
 from collections import deque
@@ -92,6 +93,7 @@ class MoveBaseNode(Hooks):
         self.ready = threading.Event()           # the node is complete (the instance may be promoted before)
         self.dormant = False                     # retired and asleep: no sensor subscriptions, costmaps paused
         self.activated_at: Optional[float] = None   # monotonic time of the last activation, until its first command
+        self.goal_started_at = 0.0                  # monotonic time the last goal was started (_start_goal)
         self.commanding = threading.Event()      # the first velocity command since the last activation went out
         self.openings = 0                        # outputs opened so far (the services belong to the last)
         self.announcement: Optional[Callable[[], None]] = None   # a taken-over goal's: after its first cycle
@@ -233,8 +235,13 @@ class MoveBaseNode(Hooks):
                 publisher.publish(msg)
                 if publisher is self.cmd_pub and self.activated_at is not None:
                     self.commanding.set()
-                    since, self.activated_at = time.monotonic() - self.activated_at, None
-                    rospy.loginfo(f'move_base: first velocity command {1000 * since:.0f} ms after becoming active')
+                    now = time.monotonic()
+                    since, started = now - self.activated_at, self.goal_started_at - self.activated_at
+                    self.activated_at = None
+                    cycle = self.control_times[-1] if self.control_times else math.nan
+                    rospy.loginfo(f'move_base: first velocity command {1000 * since:.0f} ms after becoming active'
+                                  f'{f" (goal started after {1000 * started:.0f} ms)" if started >= 0 else ""}; '
+                                  f'its control cycle took {1000 * cycle:.0f} ms')
 
     def _conclude(self, terminal, **kwargs) -> bool:
         """Give the current goal a terminal status (``terminal`` is a SimpleActionServer setter), unless this
@@ -483,12 +490,14 @@ class MoveBaseNode(Hooks):
                                                          f'{target.header.frame_id} into the {self.global_frame} frame')
             return False
         p, q = goal.pose.position, goal.pose.orientation
-        outcome = self.core.new_goal(p.x, p.y, (q.x, q.y, q.z, q.w), rospy.get_time(), z=p.z)
+        outcome = self.core.new_goal(p.x, p.y, (q.x, q.y, q.z, q.w), rospy.get_time(), z=p.z,
+                                     checked=takeover is not None)
         if outcome is None and takeover is not None:
             self.core.restore_recovery(takeover[0], takeover[1])
             if takeover[2]:                    # it was being controlled: along its plan, without planning first
                 self.core.restore_plan(np.array(takeover[2]), rospy.get_time())
         self._note_pursuit(goal_id if outcome is None else None)
+        self.goal_started_at = time.monotonic()
         if outcome is not None:
             self._conclude(self.server.set_aborted, text=outcome.text)
             return False

@@ -191,13 +191,17 @@ class MoveBaseCore:
             self.plan = None
             self._reset_state()
 
-    def new_goal(self, x: float, y: float, q: Quaternion, now: float, z: float = 0.0) -> Optional[Outcome]:
+    def new_goal(self, x: float, y: float, q: Quaternion, now: float, z: float = 0.0,
+                 checked: bool = False) -> Optional[Outcome]:
         """Start (or replace) the goal; returns an ABORTED outcome if the goal is refused.
 
         Args:
             x, y, z: goal position in the global frame [m].
             q: goal orientation (x, y, z, w).
             now: current time [s].
+            checked: the backend's reachability check was passed already (a goal taken over from the instance
+                that accepted it): not repeated. It reads the global costmap, so it waits for an update in
+                progress: on the capped robot up to hundreds of ms before a taken-over goal's first command.
         """
         problem = goal_problem(x, y, z, q)
         if problem is not None:
@@ -207,7 +211,8 @@ class MoveBaseCore:
             return Outcome('ABORTED', text)
         goal = Pose2D(float(x), float(y), quaternion_to_yaw(q))
         try:
-            self.backend.check_goal(goal)
+            if not checked:
+                self.backend.check_goal(goal)
         except PlanningError as err:
             text = f'Aborting on goal because it cannot be reached: {err.text}'
             log.warning(text)
