@@ -543,3 +543,70 @@ def test_a_retired_instance_sleeps_without_its_inputs_and_wakes_to_take_a_goal_o
     assert math.hypot(rec.pose[0] - goal_x, rec.pose[1]) <= 0.2
     assert d.alive()
     assert_clean(d, 'D')
+
+
+def test_a_goal_that_arrives_while_the_execute_thread_looks_is_not_left_waiting(ros):
+    """actionlib's execute thread looks for a new goal, then waits without a lock: a goal arriving in between is
+    notified to nobody and starts only when that wait times out (0.1 s). Here the goal is delivered by another
+    thread at exactly that moment (the look waits up to 1 s for it): it must start on a notification, with no
+    wait of the execute thread timing out between its arrival and its start."""
+    from actionlib_msgs.msg import GoalID
+    from move_base_msgs.msg import MoveBaseAction, MoveBaseActionGoal
+    from cnr_navigation.action_server import TakeoverActionServer
+
+    ran = threading.Event()
+    timed_out = []                # waits of the execute thread that ended by their timeout, once armed
+
+    class Recording(threading.Condition):
+        armed = False
+
+        def wait(self, timeout=None):
+            woken = super().wait(timeout)
+            if self.armed and not woken and not ran.is_set():
+                timed_out.append(timeout)
+            return woken
+
+    class Server(TakeoverActionServer):
+        EXECUTE_POLL = 60.0       # this server's own look: a timeout would show as a hang, not a pass
+        armed = False
+
+        def is_new_goal_available(self):
+            seen = super().is_new_goal_available()
+            if self.armed and not seen:               # the goal arrives between the look and the wait
+                self.armed = False
+                goal = MoveBaseActionGoal()
+                goal.goal_id = GoalID(id='between', stamp=rospy.Time.now())
+                goal.goal.target_pose.header.frame_id = 'map'
+                goal.goal.target_pose.pose.orientation.w = 1.0
+                sender = threading.Thread(target=self.action_server.internal_goal_callback, args=(goal,))
+                sender.start()
+                sender.join(1.0)                      # done at once unless the look holds the lock
+            return seen
+
+    def execute(_goal):
+        ran.set()
+        server.set_succeeded()
+
+    server = Server('/takeover_lost_wakeup', MoveBaseAction, execute)
+    old, server.execute_condition = server.execute_condition, Recording(server.lock)
+    with old:
+        old.notify()              # the execute thread leaves its first wait and takes the recording condition
+    try:
+        server.start_with([])
+        with server.execute_condition:       # arm the look, then wake the execute thread for it
+            server.armed = server.execute_condition.armed = True
+            server.execute_condition.notify()
+        wait_until(ran.is_set, 20, 'the goal that arrived during the look to run')
+        assert server.current_goal.get_goal_id().id == 'between'
+        assert not timed_out, f'the goal waited for the execute thread\'s wait to time out ({timed_out} s)'
+    finally:
+        server.release()
+        with server.terminate_mutex:
+            server.need_to_terminate = True
+        with server.execute_condition:
+            server.execute_condition.notify()
+        server.action_server.goal_sub.unregister()
+        server.action_server.cancel_sub.unregister()
+        for pub in (server.action_server.status_pub, server.action_server.result_pub,
+                    server.action_server.feedback_pub):
+            pub.unregister()
