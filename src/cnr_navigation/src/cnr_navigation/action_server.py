@@ -130,10 +130,9 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
     def executeLoop(self) -> None:
         """actionlib's execute thread without its lost wake-up. actionlib's looks for a new goal without a lock and
         then waits :attr:`EXECUTE_POLL`; a goal that arrives between the look and the wait is notified to nobody
-        and waits for the timeout — and so does one that arrives while the execute callback returns. A goal
-        taken over at a promotion then started up to 100 ms late (the bench on the capped robot: 3 of 10
-        hand-overs to it, its first command 161-188 ms after the activation). Here the look and the wait are
-        under the execute condition's lock, which the goal callback holds while it sets the goal and notifies."""
+        and waits for the timeout — and so does one that arrives while the execute callback returns: a goal
+        taken over at a promotion could start up to 100 ms late. Here the look and the wait are under the
+        execute condition's lock, which the goal callback holds while it sets the goal and notifies."""
         while not rospy.is_shutdown():
             with self.terminate_mutex:
                 if self.need_to_terminate:
