@@ -93,7 +93,7 @@ class MoveBaseNode(Hooks):
         self.ready = threading.Event()           # the node is complete (the instance may be promoted before)
         self.dormant = False                     # retired and asleep: no sensor subscriptions, costmaps paused
         self.activated_at: Optional[float] = None   # monotonic time of the last activation, until its first command
-        self.goal_started_at = 0.0                  # monotonic time the last goal was started (_start_goal)
+        self.steps: Dict[str, float] = {}           # monotonic times of the steps after the last activation (_out)
         self.commanding = threading.Event()      # the first velocity command since the last activation went out
         self.openings = 0                        # outputs opened so far (the services belong to the last)
         self.announcement: Optional[Callable[[], None]] = None   # a taken-over goal's: after its first cycle
@@ -235,12 +235,13 @@ class MoveBaseNode(Hooks):
                 publisher.publish(msg)
                 if publisher is self.cmd_pub and self.activated_at is not None:
                     self.commanding.set()
-                    now = time.monotonic()
-                    since, started = now - self.activated_at, self.goal_started_at - self.activated_at
+                    since = time.monotonic() - self.activated_at
+                    steps = ', '.join(f'{name} {1000 * (t - self.activated_at):.0f}' for name, t in self.steps.items()
+                                      if t >= self.activated_at)
                     self.activated_at = None
                     cycle = self.control_times[-1] if self.control_times else math.nan
                     rospy.loginfo(f'move_base: first velocity command {1000 * since:.0f} ms after becoming active'
-                                  f'{f" (goal started after {1000 * started:.0f} ms)" if started >= 0 else ""}; '
+                                  f'{f" (then, in ms: {steps})" if steps else ""}; '
                                   f'its control cycle took {1000 * cycle:.0f} ms')
 
     def _conclude(self, terminal, **kwargs) -> bool:
@@ -336,14 +337,21 @@ class MoveBaseNode(Hooks):
     def on_active(self) -> None:
         self.commanding.clear()
         self.activated_at = time.monotonic()       # the first velocity command after it is logged (_out)
+        self.steps = {}
         if not self.outputs_open:
             threading.Thread(target=self._open_outputs, name='open_outputs', daemon=True).start()
+
+    def _step(self, name: str) -> None:
+        """Note when a step of the first command's path came (logged with the first command)."""
+        if self.activated_at is not None:
+            self.steps[name] = time.monotonic()
 
     def _open_outputs(self) -> None:
         """Action server (taking over the handed-over goals first), then services and reconfigure services: a
         goal handed over is controlled first (the registrations with the master wait for its first velocity
         command, at most two control periods: on the capped robot they competed with the first control cycle,
         whose command came 31-497 ms after the activation, median 171 ms, bench_migration.sh session 19)."""
+        self._step('opening')
         self.ready.wait()
         with self.open_lock:
             if self.outputs_open or self.instance.frozen or rospy.core.is_shutdown_requested():
@@ -365,6 +373,7 @@ class MoveBaseNode(Hooks):
                     goals.append((self._action_goal(handover.next_goal), 'pending',
                                   handover.next_goal.cancel_requested))
                 replayed = self.server.start_with(goals, handover.seen_goals, handover.seen_cancels)
+                self._step('server started')
             if replayed:
                 rospy.loginfo(f'move_base: sent while no instance was active, taken up: {", ".join(replayed)}')
         if goals:
@@ -497,7 +506,7 @@ class MoveBaseNode(Hooks):
             if takeover[2]:                    # it was being controlled: along its plan, without planning first
                 self.core.restore_plan(np.array(takeover[2]), rospy.get_time())
         self._note_pursuit(goal_id if outcome is None else None)
-        self.goal_started_at = time.monotonic()
+        self._step('goal started')
         if outcome is not None:
             self._conclude(self.server.set_aborted, text=outcome.text)
             return False
@@ -535,6 +544,7 @@ class MoveBaseNode(Hooks):
     @quiet_at_shutdown
     def _execute(self, goal: MoveBaseGoal) -> None:
         """The action's execute callback: ``MoveBase::executeCb``."""
+        self._step('executing')
         try:
             self._run_goal(goal)
         finally:
