@@ -405,12 +405,20 @@ class TakeoverPair:
 
     def close(self) -> None:
         for server in self.servers.values():
-            server.release()
-            server.action_server.goal_sub.unregister()
-            server.action_server.cancel_sub.unregister()
-            for pub in (server.action_server.status_pub, server.action_server.result_pub,
-                        server.action_server.feedback_pub):
-                pub.unregister()
+            close_server(server)
+
+
+def close_server(server) -> None:
+    """A TakeoverActionServer made in this process released, its execute thread ended, its topics unregistered."""
+    server.release()
+    with server.terminate_mutex:
+        server.need_to_terminate = True
+    with server.execute_condition:
+        server.execute_condition.notify()
+    server.action_server.goal_sub.unregister()
+    server.action_server.cancel_sub.unregister()
+    for pub in (server.action_server.status_pub, server.action_server.result_pub, server.action_server.feedback_pub):
+        pub.unregister()
 
 
 @pytest.fixture
@@ -600,13 +608,4 @@ def test_a_goal_that_arrives_while_the_execute_thread_looks_is_not_left_waiting(
         assert server.current_goal.get_goal_id().id == 'between'
         assert not timed_out, f'the goal waited for the execute thread\'s wait to time out ({timed_out} s)'
     finally:
-        server.release()
-        with server.terminate_mutex:
-            server.need_to_terminate = True
-        with server.execute_condition:
-            server.execute_condition.notify()
-        server.action_server.goal_sub.unregister()
-        server.action_server.cancel_sub.unregister()
-        for pub in (server.action_server.status_pub, server.action_server.result_pub,
-                    server.action_server.feedback_pub):
-            pub.unregister()
+        close_server(server)
