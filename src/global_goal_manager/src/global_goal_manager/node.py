@@ -18,6 +18,7 @@ from cnr_msgs.msg import CellStates
 from cnr_msgs.srv import NextGoal, NextGoalResponse
 from cnr_params.ros import init_node, private_section, quiet_at_shutdown
 from global_goal_manager.core.policies import CellView, GoalManagerParams, read_params
+from migration_manager.client import NOT_ACTIVE
 from migration_manager.instance import Hooks, ManagedInstance, Retiring
 
 
@@ -69,7 +70,7 @@ class GoalManagerNode(Hooks):
     @quiet_at_shutdown
     def _next_goal(self, req) -> NextGoalResponse:
         if not self.instance.active:
-            return NextGoalResponse(success=False, message='not the active instance (lease lapsed)',
+            return NextGoalResponse(success=False, message=f'{NOT_ACTIVE} (standby, frozen or lease lapsed)',
                                     policy=self.policy.name)
         if not (math.isfinite(req.robot_x) and math.isfinite(req.robot_y)):
             return NextGoalResponse(success=False, message='robot position is not finite', policy=self.policy.name)

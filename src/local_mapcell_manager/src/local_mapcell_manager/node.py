@@ -24,9 +24,10 @@ from cnr_params.ros import call_with_timeout, init_node, private_section, quiet_
 from local_mapcell_manager.core.ledger import DUPLICATE, Ledger, Prepared, Reading, Replay, state_newest
 from local_mapcell_manager.core.params import ManagerParams, read_params
 from local_mapcell_manager.core.store import CellBook, MeasurementStore
+from migration_manager import client
 from migration_manager.instance import Hooks, ManagedInstance, Retiring
 
-NOT_ACTIVE = 'not the active instance (standby, frozen or lease lapsed)'
+NOT_ACTIVE = f'{client.NOT_ACTIVE} (standby, frozen or lease lapsed)'
 
 
 def cell_msg(grid: MapcellGrid, book: CellBook, index: int) -> CellStateMsg:

@@ -27,12 +27,13 @@ import cnr_params
 from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, MfgActivity, SearchState
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.pose import yaw_to_quaternion
-from cnr_msgs.srv import NextGoal
-from cnr_params.ros import call_with_timeout, init_node, private_section
+from cnr_msgs.srv import NextGoal, NextGoalResponse
+from cnr_params.ros import init_node, private_section
 from mfg.core.fallback import LocalGoals
 from mfg.core.memory import Goal, Memory
 from mfg.core.params import MfgParams, read_params
 from mfg.core.search import HotspotSearch
+from migration_manager.client import MovableServiceProxy
 from migration_manager.instance import Hooks, ManagedInstance
 
 
@@ -60,7 +61,7 @@ class MfgNode(Hooks):
                                      last_temperature=math.nan, last_cell=-1)
         self.instance = ManagedInstance('mfg', self)
         self.client = actionlib.SimpleActionClient('move_base', MoveBaseAction)
-        self.next_goal = rospy.ServiceProxy(p.next_goal_service, NextGoal)     # one proxy for every goal
+        self.next_goal = MovableServiceProxy(p.next_goal_service, NextGoal)     # one connection, follows it
         self.goal_manager_reachable = True
         self.state_pub = self.instance.publisher('~state', SearchState, queue_size=10, latch=True)
         self.hotspot_pub = self.instance.publisher('hotspot', Hotspot, queue_size=1, latch=True)
@@ -268,15 +269,11 @@ class MfgNode(Hooks):
         timeout = self.p.next_goal_timeout
         problem = ''
         asked = rospy.Time.now().to_sec()
-        try:
-            rospy.wait_for_service(self.p.next_goal_service, timeout)
-            ok, res = call_with_timeout(self.next_goal, timeout, x, y)
-            if not ok:
-                problem = str(res)
-            elif not res.success:
-                problem = res.message
-        except rospy.ROSException as exc:          # not registered within the timeout
-            problem = str(exc)
+        ok, res, _sent = self.next_goal.call(timeout, x, y)      # registration and answer within the timeout
+        if not ok:
+            problem = res.message if isinstance(res, NextGoalResponse) else str(res)
+        elif not res.success:
+            problem = res.message
         with self.lock:
             self.memory.activity.waited(rospy.Time.now().to_sec() - asked)
         if not problem:

@@ -2,11 +2,11 @@
 
 Records every message of the given topics with its arrival time (wall clock, this host) and the instance that
 published it (the ``cnr_instance`` connection header; '-' for an unmanaged publisher), and optionally calls
-``/global_goal_manager/next_goal`` at a fixed rate over a persistent connection, found anew after a failed or
-refused request (the global goal manager has no periodic output of its own),
-recording each answer at the time its request was sent (a request sent then was served), and move_base's goal
-results (``/move_base/result``: ok = succeeded, the final status code in the instance column). For the modules in
-``~status_modules`` it also records when each instance closed its outputs for good (topic ``frozen``: the
+``/global_goal_manager/next_goal`` at a fixed rate over a persistent connection that, after a failed or refused
+request, waits for the name to move to another provider (:class:`migration_manager.client.MovableServiceProxy`;
+the global goal manager has no periodic output of its own), recording each answer at the time its request went
+out (a request sent then was served), and move_base's goal results (``/move_base/result``: ok = succeeded, the
+final status code in the instance column). For the modules in ``~status_modules`` it also records when each instance closed its outputs for good (topic ``frozen``: the
 frozen status's stamp, the instance's own clock — on the testbed one clock for every host). Writes a TSV
 (``time``, ``topic``, ``instance``, ``ok``, ``stamp``: the message's header stamp for a type with a header, so an
 output can be matched with the input it carries) as it goes, flushed per line, so a reader sees the gaps: the
@@ -19,7 +19,7 @@ from __future__ import annotations
 import struct
 import threading
 import time
-from typing import Dict, Optional
+from typing import Dict
 
 import rospy
 from actionlib_msgs.msg import GoalStatus
@@ -28,7 +28,8 @@ from move_base_msgs.msg import MoveBaseActionResult
 import cnr_params
 from cnr_msgs.msg import InstanceStatus
 from cnr_msgs.srv import NextGoal
-from cnr_params.ros import call_with_timeout, init_node, private_section
+from cnr_params.ros import init_node, private_section
+from migration_manager.client import MovableServiceProxy
 from migration_manager.instance import INSTANCE_HEADER
 
 
@@ -58,7 +59,8 @@ class Probe:
         for m in modules:
             for h in hosts:
                 rospy.Subscriber(f'/migration/{m}/{h}/status', InstanceStatus, self._on_status, queue_size=20)
-        self.next_goal: Optional[rospy.ServiceProxy] = None     # persistent; found anew after a failed call
+        # persistent; after a failed or refused request it waits for the name to move (migration_manager.client)
+        self.next_goal = MovableServiceProxy('/global_goal_manager/next_goal', NextGoal)
         self.last_instance = ''
 
     def _write(self, topic: str, instance: str, ok: bool, at: float = 0.0, stamp: str = '') -> None:
@@ -89,21 +91,6 @@ class Probe:
     def _on_result(self, msg: MoveBaseActionResult) -> None:
         self._write('/move_base/result', str(msg.status.status), msg.status.status == GoalStatus.SUCCEEDED)
 
-    def _call_next_goal(self) -> bool:
-        """One request over a persistent connection. After an error, a timeout or a refusal (the instance asked
-        is no longer active) the connection is closed and the next request looks the service up again, so it
-        reaches whichever instance holds the name then. (A new connection per request — a lookup on the master,
-        a TCP connection and a thread in the served node, 20 times a second — loaded the robot the bench
-        measures.)"""
-        if self.next_goal is None:
-            self.next_goal = rospy.ServiceProxy('/global_goal_manager/next_goal', NextGoal, persistent=True)
-        done, res = call_with_timeout(self.next_goal, 1.0, 0.0, 0.0)
-        ok = bool(done and res.success)
-        if not ok:
-            proxy, self.next_goal = self.next_goal, None
-            proxy.close()
-        return ok
-
     def spin(self) -> None:
         if self.rate <= 0:
             rospy.spin()
@@ -111,8 +98,8 @@ class Probe:
         period = 1.0 / self.rate
         next_call = time.monotonic()
         while not rospy.core.is_shutdown_requested():
-            sent = time.time()
-            self._write('next_goal', '', self._call_next_goal(), sent)
+            ok, _answer, sent = self.next_goal.call(1.0, 0.0, 0.0)
+            self._write('next_goal', '', ok, sent)
             next_call = max(next_call + period, time.monotonic())
             time.sleep(max(0.0, next_call - time.monotonic()))
 

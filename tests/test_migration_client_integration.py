@@ -1,0 +1,109 @@
+"""migration_manager.client.MovableServiceProxy against a real rosmaster and real providers (TCPROS).
+
+Two provider processes register the same service name, as two instances of a movable module do across a
+migration: one refuses (not the active instance), the other serves. The client must not ask the refusing
+provider again while the name still points at it, must reach the new provider once it registers, and must ask
+the old one again when the name never moves (a lapsed lease that came back)."""
+from __future__ import annotations
+
+import sys
+import threading
+import time
+
+import pytest
+
+pytest.importorskip('rospy')
+
+from cnr_harness import wait_until  # noqa: E402
+
+NAME = '/movable_test/next_goal'
+
+PROVIDER = r'''
+import sys, rospy
+from cnr_msgs.srv import NextGoal, NextGoalResponse
+from migration_manager.client import NOT_ACTIVE
+who, mode = sys.argv[1], sys.argv[2]
+rospy.init_node(who)
+count = 0
+def handle(req):
+    global count
+    count += 1
+    print(f"request {count}", flush=True)
+    if mode == "refuse":
+        return NextGoalResponse(success=False, message=f"{NOT_ACTIVE} (frozen)", policy=who)
+    return NextGoalResponse(success=True, message="served", policy=who)
+rospy.Service(sys.argv[3], NextGoal, handle)
+print("ready", flush=True)
+rospy.spin()
+'''
+
+
+def requests(proc) -> int:
+    return proc.output().count('request ')
+
+
+def provider(ros, who: str, mode: str):
+    proc = ros.master.run([sys.executable, '-c', PROVIDER, who, mode, NAME], log_name=who)
+    wait_until(lambda: 'ready' in proc.output(), 30.0, f'{who} registered', proc)
+    return proc
+
+
+def lookup(ros) -> str:
+    try:
+        return ros.master.call('lookupService', NAME)
+    except RuntimeError:
+        return ''
+
+
+def test_a_refusing_provider_is_not_asked_again_until_the_name_moves(ros):
+    from cnr_msgs.srv import NextGoal
+    from migration_manager.client import MovableServiceProxy
+    old = provider(ros, 'provider_old', 'refuse')
+    new = None
+    client = MovableServiceProxy(NAME, NextGoal)
+    try:
+        ok, answer, _ = client.call(5.0, 0.0, 0.0)
+        assert not ok and answer.policy == 'provider_old', answer
+        assert requests(old) == 1
+
+        # the next call waits for the name to move (the refusing provider is not asked meanwhile) ...
+        box = {}
+        caller = threading.Thread(target=lambda: box.update(result=client.call(10.0, 0.0, 0.0)))
+        caller.start()
+        time.sleep(0.5)               # (not synchronisation: the time the old provider would have been asked in)
+        assert requests(old) == 1, 'the provider that refused was asked again while the name still pointed at it'
+        assert caller.is_alive(), f'the call did not wait for the name to move: {box}'
+        # ... and reaches the new provider as soon as it holds the name
+        new = provider(ros, 'provider_new', 'serve')
+        caller.join(10.0)
+        ok, answer, sent = box['result']
+        assert ok and answer.policy == 'provider_new', answer
+        assert requests(old) == 1 and requests(new) == 1
+        assert sent <= time.time()
+    finally:
+        client.close()
+        for proc in (new, old):
+            if proc is not None:
+                ros.master.stop_child(proc)
+    wait_until(lambda: not lookup(ros), 10.0, 'the providers unregistered')
+
+
+def test_a_name_that_never_moves_is_asked_again_after_one_timeout(ros):
+    from cnr_msgs.srv import NextGoal
+    from migration_manager.client import MovableServiceProxy
+    old = provider(ros, 'provider_lapsed', 'refuse')
+    client = MovableServiceProxy(NAME, NextGoal)
+    try:
+        ok, answer, _ = client.call(5.0, 0.0, 0.0)
+        assert not ok and requests(old) == 1
+        ok, answer, _ = client.call(0.3, 0.0, 0.0)        # the name stays: no request, a failure within 0.3 s
+        assert not ok and 'only the provider that refused' in str(answer), answer
+        assert requests(old) == 1
+        ok, answer, _ = client.call(5.0, 0.0, 0.0)        # then the same provider is asked again
+        assert not ok and answer.policy == 'provider_lapsed'
+        wait_until(lambda: requests(old) == 2, 5.0, 'the second request at the provider')
+    finally:
+        client.close()
+        ros.master.stop_child(old)
+    ok, answer, _ = client.call(0.3, 0.0, 0.0)            # no provider at all: unavailable within the timeout
+    assert not ok and 'unavailable' in str(answer), answer
