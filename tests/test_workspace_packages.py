@@ -152,3 +152,14 @@ def test_every_callback_that_publishes_is_quiet_at_shutdown():
                     if 'quiet_at_shutdown' not in decorators:
                         bare.append(f'{os.path.relpath(path, WS)}: {method}')
     assert not bare, bare
+
+
+def test_every_master_s_graph_caches_rospy_s_per_log_parameter():
+    """rospy reads /rosout_disable_topics_generation on every log call and asks the master each time while it
+    is unset (one XML-RPC round trip per loginfo). The launches that start each master's graph set it: robot.launch
+    (every single-master mission and the two-host robot, through mission.launch and world.launch) and host.launch
+    (each host of the two-host mission)."""
+    for rel in ('cnr_bringup/launch/robot.launch', 'cnr_mission/launch/host.launch'):
+        root = ET.parse(os.path.join(SRC, rel)).getroot()
+        params = {p.get('name'): p.get('value') for p in root.findall('param')}
+        assert params.get('/rosout_disable_topics_generation') == 'false', f'{rel} does not set it'
