@@ -1,9 +1,10 @@
 """migration_manager.client.MovableServiceProxy against a real rosmaster and real providers (TCPROS).
 
 Two provider processes register the same service name, as two instances of a movable module do across a
-migration: one refuses (not the active instance), the other serves. The client must not ask the refusing
-provider again while the name still points at it, must reach the new provider once it registers, and must ask
-the old one again when the name never moves (a lapsed lease that came back)."""
+migration: one refuses (not the active instance), the other serves. Within one call the client must not ask the
+refusing provider again while the name still points at it, must be answered by the new provider once that
+registers, and when the name never moves its next call must ask the old one again (a lapsed lease that came
+back)."""
 from __future__ import annotations
 
 import sys
@@ -62,24 +63,23 @@ def test_a_refusing_provider_is_not_asked_again_until_the_name_moves(ros):
     new = None
     client = MovableServiceProxy(NAME, NextGoal)
     try:
-        ok, answer, _ = client.call(5.0, 0.0, 0.0)
-        assert not ok and answer.policy == 'provider_old', answer
-        assert requests(old) == 1
-
-        # the next call waits for the name to move (the refusing provider is not asked meanwhile) ...
+        # one call: the old provider refuses, the call waits for the name to move (not asking it again) ...
         box = {}
         caller = threading.Thread(target=lambda: box.update(result=client.call(10.0, 0.0, 0.0)))
         caller.start()
+        wait_until(lambda: requests(old) == 1, 10.0, 'the request at the old provider', old)
         time.sleep(0.5)               # (not synchronisation: the time the old provider would have been asked in)
         assert requests(old) == 1, 'the provider that refused was asked again while the name still pointed at it'
         assert caller.is_alive(), f'the call did not wait for the name to move: {box}'
-        # ... and reaches the new provider as soon as it holds the name
+        # ... and is answered by the new provider as soon as that holds the name
         new = provider(ros, 'provider_new', 'serve')
         caller.join(10.0)
         ok, answer, sent = box['result']
         assert ok and answer.policy == 'provider_new', answer
         assert requests(old) == 1 and requests(new) == 1
         assert sent <= time.time()
+        ok, answer, _ = client.call(5.0, 0.0, 0.0)        # the connection to it is kept
+        assert ok and answer.policy == 'provider_new' and requests(new) == 2
     finally:
         client.close()
         for proc in (new, old):
@@ -88,22 +88,41 @@ def test_a_refusing_provider_is_not_asked_again_until_the_name_moves(ros):
     wait_until(lambda: not lookup(ros), 10.0, 'the providers unregistered')
 
 
-def test_a_name_that_never_moves_is_asked_again_after_one_timeout(ros):
+def test_a_name_that_never_moves_is_asked_again_by_the_next_call(ros):
     from cnr_msgs.srv import NextGoal
     from migration_manager.client import MovableServiceProxy
     old = provider(ros, 'provider_lapsed', 'refuse')
     client = MovableServiceProxy(NAME, NextGoal)
     try:
-        ok, answer, _ = client.call(5.0, 0.0, 0.0)
-        assert not ok and requests(old) == 1
-        ok, answer, _ = client.call(0.3, 0.0, 0.0)        # the name stays: no request, a failure within 0.3 s
-        assert not ok and 'only the provider that refused' in str(answer), answer
-        assert requests(old) == 1
-        ok, answer, _ = client.call(5.0, 0.0, 0.0)        # then the same provider is asked again
-        assert not ok and answer.policy == 'provider_lapsed'
-        wait_until(lambda: requests(old) == 2, 5.0, 'the second request at the provider')
+        ok, answer, _ = client.call(0.3, 0.0, 0.0)        # refused, then no other provider within 0.3 s
+        assert not ok and answer.policy == 'provider_lapsed', answer
+        assert requests(old) == 1, 'asked twice in one call'
+        ok, answer, _ = client.call(0.3, 0.0, 0.0)        # the next call asks it again (a lease that came back)
+        assert not ok and answer.policy == 'provider_lapsed', answer
+        assert requests(old) == 2
     finally:
         client.close()
         ros.master.stop_child(old)
     ok, answer, _ = client.call(0.3, 0.0, 0.0)            # no provider at all: unavailable within the timeout
     assert not ok and 'unavailable' in str(answer), answer
+
+
+def test_a_kept_connection_to_a_provider_that_went_away_is_made_again_within_the_call(ros):
+    from cnr_msgs.srv import NextGoal
+    from migration_manager.client import MovableServiceProxy
+    first = provider(ros, 'provider_first', 'serve')
+    client = MovableServiceProxy(NAME, NextGoal)
+    second = None
+    try:
+        ok, answer, _ = client.call(5.0, 0.0, 0.0)
+        assert ok and answer.policy == 'provider_first'
+        ros.master.stop_child(first)                       # its kept connection breaks
+        first = None
+        second = provider(ros, 'provider_second', 'serve')
+        ok, answer, _ = client.call(5.0, 0.0, 0.0)
+        assert ok and answer.policy == 'provider_second', answer
+    finally:
+        client.close()
+        for proc in (first, second):
+            if proc is not None:
+                ros.master.stop_child(proc)

@@ -11,9 +11,9 @@ link a new connection to it costs three round trips (TCP, header, request) befor
 
 :class:`MovableServiceProxy` keeps one persistent connection; after a refusal or a failure it does not ask that
 provider again until the name has moved: it polls its own master (local, cheap) every :data:`LOOKUP_POLL` s
-until the name resolves to another provider, within the call's timeout; if it never moves within it, the call
-fails and the next one asks the same provider again (an instance whose lease lapsed and came back keeps its
-address). The robot never
+until the name resolves to another provider and asks that one, within the call's timeout; if the name never
+moves within it, the call fails and the next one asks the same provider again (an instance whose lease lapsed
+and came back keeps its address). The robot never
 waits on the cloud: every call returns within its timeout.
 """
 from __future__ import annotations
@@ -51,28 +51,41 @@ class MovableServiceProxy:
         self.master = rosgraph.Master(rospy.names.get_caller_id())
 
     def call(self, timeout: float, *args: Any) -> Tuple[bool, Any, float]:
-        """One request, within ``timeout`` wall s in all.
+        """One answer from an active provider, within ``timeout`` wall s in all: after a refusal or a failure the
+        call waits for the name to move and asks the new provider (a request during a hand-over reaches the new
+        instance, not a refusal); a provider that refused is not asked again within the call.
 
         Returns:
-            ``(ok, result, sent)``: ok is False for an exception (then ``result``), a timeout, a refusal
-            (:func:`refused`; the answer in ``result``) or no provider within the timeout; ``sent`` is the wall time
-            the request went out (after waiting for the name to move), or when the call gave up without one.
+            ``(ok, result, sent)``: ok is False when no provider answered within the timeout: ``result`` is then
+            the last refusal (:func:`refused`) or exception (a timeout: ``TimeoutError``), or why no provider was
+            asked; ``sent`` is the wall time the last request went out (after waiting for the name to move), or
+            when the call gave up without one.
         """
         deadline = time.monotonic() + timeout
-        if self.proxy is None:
-            problem = self._wait_for_provider(deadline)
-            if problem is not None:
-                return False, problem, time.time()
-            self.proxy = rospy.ServiceProxy(self.name, self.service_class, persistent=True)
+        result: Any = None
         sent = time.time()
-        done, result = call_with_timeout(self.proxy, max(0.0, deadline - time.monotonic()), *args)
-        if done and not refused(result):
-            self.avoid = None
-            return True, result, sent
-        proxy, self.proxy = self.proxy, None
-        self.avoid = proxy.uri              # set by the lookup the call made (None: not even looked up)
-        proxy.close()
-        return False, result, sent
+        while True:
+            kept = self.proxy is not None   # a connection made by an earlier call
+            if not kept:
+                problem = self._wait_for_provider(deadline)
+                if problem is not None:
+                    return False, (problem if result is None else result), (time.time() if result is None else sent)
+                self.proxy = rospy.ServiceProxy(self.name, self.service_class, persistent=True)
+            sent = time.time()
+            done, result = call_with_timeout(self.proxy, max(0.0, deadline - time.monotonic()), *args)
+            if done and not refused(result):
+                self.avoid = None
+                return True, result, sent
+            proxy, self.proxy = self.proxy, None
+            proxy.close()
+            if isinstance(result, TimeoutError):
+                self.avoid = proxy.uri
+                return False, result, sent
+            # a kept connection that broke is looked up and made again before its provider is avoided (the
+            # provider may be the same, e.g. the other end dropped an idle connection); a refusal, or a fresh
+            # connection that fails, is not asked again until the name moves
+            stale = kept and not done and not refused(result)
+            self.avoid = None if stale else proxy.uri   # (set by the lookup the call made; None: not looked up)
 
     def close(self) -> None:
         if self.proxy is not None:
@@ -86,8 +99,9 @@ class MovableServiceProxy:
             return None
 
     def _wait_for_provider(self, deadline: float) -> Optional[Exception]:
-        """Wait until the name resolves to a provider other than the one to avoid (None), or the deadline: then
-        the one to avoid is asked again (None) if it is still the provider, else an exception saying why not."""
+        """Wait until the name resolves to a provider other than the one to avoid (returns None) or the deadline
+        (returns an exception saying why not; a provider that still holds the name is then no longer avoided: the
+        next call asks it again)."""
         while True:
             uri = self._lookup()
             if uri is not None and uri != self.avoid:
