@@ -154,7 +154,7 @@ def test_every_callback_that_publishes_is_quiet_at_shutdown():
     assert not bare, bare
 
 
-def test_every_master_s_graph_caches_rospy_s_per_log_parameter():
+def test_the_launches_set_the_parameter_rospy_reads_on_every_log_call():
     """rospy reads /rosout_disable_topics_generation on every log call and asks the master each time while it
     is unset (one XML-RPC round trip per loginfo). The launches that start each master's graph set it: robot.launch
     (every single-master mission and the two-host robot, through mission.launch and world.launch) and host.launch
