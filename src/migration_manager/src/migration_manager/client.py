@@ -13,8 +13,8 @@ link a new connection to it costs three round trips (TCP, header, request) befor
 provider again until the name has moved: it polls its own master (local, cheap) every :data:`LOOKUP_POLL` s
 until the name resolves to another provider and asks that one, within the call's timeout; if the name never
 moves within it, the call fails and the next one asks the same provider again (an instance whose lease lapsed
-and came back keeps its address). The robot never
-waits on the cloud: every call returns within its timeout.
+and came back keeps its address). A kept connection that broke is made again once before its provider is
+avoided. The robot never waits on the cloud: every call returns within its timeout.
 """
 from __future__ import annotations
 
