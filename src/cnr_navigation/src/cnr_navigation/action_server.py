@@ -132,7 +132,11 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
         then waits :attr:`EXECUTE_POLL`; a goal that arrives between the look and the wait is notified to nobody
         and waits for the timeout — and so does one that arrives while the execute callback returns: a goal
         taken over at a promotion could start up to 100 ms late. Here the look and the wait are under the
-        execute condition's lock, which the goal callback holds while it sets the goal and notifies."""
+        execute condition's lock, which the goal callback holds while it sets the goal and notifies.
+
+        And without actionlib's abort at the shutdown: a callback the node's shutdown ended leaves its goal
+        active, and aborting it then publishes onto topics the shutdown closes ("publish() to a closed topic"
+        with its traceback at a mission's end, CI of session 24); the thread just ends."""
         while not rospy.is_shutdown():
             with self.terminate_mutex:
                 if self.need_to_terminate:
@@ -147,12 +151,16 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
             goal = self.accept_new_goal()
             try:
                 self.execute_callback(goal)
+                if rospy.core.is_shutdown_requested():
+                    break          # the shutdown ended the callback and closes the topics: no status can go out
                 if self.is_active():
                     rospy.logwarn('Your executeCallback did not set the goal to a terminal status. This is a bug in '
                                   'your ActionServer implementation. Fix your code! For now, the ActionServer will '
                                   'set this goal to aborted')
                     self.set_aborted(None, 'No terminal state was set.')
             except Exception as exc:       # as actionlib: the goal aborted, the thread goes on
+                if rospy.core.is_shutdown_requested():
+                    break          # e.g. "publish() to a closed topic": the node is going
                 rospy.logerr(f'Exception in your execute callback: {exc}\n{traceback.format_exc()}')
                 self.set_aborted(None, f'Exception in execute callback: {exc}')
 

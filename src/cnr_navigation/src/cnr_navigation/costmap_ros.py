@@ -254,6 +254,8 @@ class CostmapROS:
             except rospy.exceptions.ROSTimeMovedBackwardsException:
                 continue
             except Exception as exc:   # keep the costmap alive; report what went wrong
+                if rospy.core.is_shutdown_requested():
+                    return             # e.g. the costmap published onto a topic the shutdown closed
                 rospy.logerr_throttle(5.0, f'{self.name}: update failed: {exc!r}')
                 rospy.sleep(0.1)
 
