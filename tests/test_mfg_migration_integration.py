@@ -77,6 +77,13 @@ class Recorder:
                 self.log[kind].append((rospy.Time.now().to_sec(), msg))
         return callback
 
+    def connected(self, ros) -> bool:
+        """Is every subscription connected to every publisher the master lists for its topic? A new instance's
+        output is only seen once the recorder has connected to it, and rospy retries a slow publisher with a
+        backoff of 1, 2, 4, 8 s: once (1 run in 3) B's first goal went out before the connection was up."""
+        pubs = dict((t, n) for t, n in ros.master.call('getSystemState')[0])
+        return all(sub.get_num_connections() >= len(pubs.get(sub.resolved_name, ())) for sub in self.subs)
+
     def since(self, kind, t):
         """Messages of ``kind`` received at sim time > t."""
         with self.lock:
@@ -181,6 +188,7 @@ def test_three_instances_hand_over_a_search_and_a_patrol_goal(mission, mfg_param
         # the hand-over outlasts the goal's goal_timeout (counted from A's send): B still drives it and measures
         wait_until(lambda: now() > frozen['goal']['sent'] + GOAL_TIMEOUT + 1.0, 60,
                    "the handed-over goal's goal_timeout to pass")
+        wait_until(lambda: rec.connected(ros), 60, 'the recorder connected to B', b)
         t = now()
         driver.promote(frozen)
         driver.wait_active(10)
@@ -230,6 +238,7 @@ def test_three_instances_hand_over_a_search_and_a_patrol_goal(mission, mfg_param
 
         # -- C: takes B's patrol goal over; the patrol goes on; a lapse sends nothing ---------------------
         c = start('mfg_c')
+        wait_until(lambda: rec.connected(ros), 60, 'the recorder connected to C', c)
         t = now()
         driver.promote(frozen_b)
         driver.wait_active(10)

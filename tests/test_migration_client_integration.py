@@ -4,7 +4,8 @@ Two provider processes register the same service name, as two instances of a mov
 migration: one refuses (not the active instance), the other serves. Within one call the client must not ask the
 refusing provider again while the name still points at it, must be answered by the new provider once that
 registers, and when the name never moves its next call must ask the old one again (a lapsed lease that came
-back)."""
+back). A request the old provider takes and never answers (an instance being stopped) is hedged to the provider
+the name moved to."""
 from __future__ import annotations
 
 import sys
@@ -124,5 +125,57 @@ def test_a_kept_connection_to_a_provider_that_went_away_is_made_again_within_the
     finally:
         client.close()
         for proc in (first, second):
+            if proc is not None:
+                ros.master.stop_child(proc)
+
+
+HANGING = r'''
+import sys, threading, rospy
+from cnr_msgs.srv import NextGoal, NextGoalResponse
+who = sys.argv[1]
+rospy.init_node(who)
+count = 0
+never = threading.Event()
+def handle(req):
+    global count
+    count += 1
+    print(f"request {count}", flush=True)
+    if count > 1:                        # as an instance being stopped: takes the request, never answers
+        never.wait()
+    return NextGoalResponse(success=True, message="served", policy=who)
+rospy.Service(sys.argv[2], NextGoal, handle)
+print("ready", flush=True)
+rospy.spin()
+'''
+
+
+def test_an_unanswered_request_is_hedged_to_the_provider_the_name_moved_to(ros):
+    """The old provider takes the request and never answers (an instance being stopped after a hand-over, on the
+    capped robot, for up to 0.7 s): once the name has moved, the new provider is asked within the same call."""
+    from cnr_msgs.srv import NextGoal
+    from migration_manager.client import MovableServiceProxy
+    old = ros.master.run([sys.executable, '-c', HANGING, 'provider_hanging', NAME], log_name='provider_hanging')
+    wait_until(lambda: 'ready' in old.output(), 30.0, 'provider_hanging registered', old)
+    new = None
+    client = MovableServiceProxy(NAME, NextGoal)
+    try:
+        ok, answer, _ = client.call(5.0, 0.0, 0.0)
+        assert ok and answer.policy == 'provider_hanging'
+        box = {}
+        caller = threading.Thread(target=lambda: box.update(result=client.call(30.0, 0.0, 0.0)))
+        caller.start()
+        wait_until(lambda: requests(old) == 2, 10.0, 'the second request at the old provider', old)
+        moved = time.time()
+        new = provider(ros, 'provider_taking_over', 'serve')
+        caller.join(30.0)
+        ok, answer, sent = box['result']
+        assert ok and answer.policy == 'provider_taking_over', answer     # not a timeout after 30 s
+        assert sent >= moved and requests(new) == 1
+        ok, answer, _ = client.call(5.0, 0.0, 0.0)        # and the connection to the new provider is kept
+        assert ok and answer.policy == 'provider_taking_over' and requests(new) == 2
+        assert requests(old) == 2
+    finally:
+        client.close()
+        for proc in (new, old):
             if proc is not None:
                 ros.master.stop_child(proc)
