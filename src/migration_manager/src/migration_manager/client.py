@@ -80,7 +80,6 @@ class MovableServiceProxy:
         self.name = rospy.names.resolve_name(name)
         self.service_class = service_class
         self.proxy: Optional[rospy.ServiceProxy] = None
-        self.kept_proxy: Optional[rospy.ServiceProxy] = None    # the connection an earlier call was answered on
         self.avoid: Optional[str] = None    # the provider that refused or failed last: asked again only if the name stays
         self.answer_times: Deque[float] = deque(maxlen=ANSWER_TIMES)   # [s] the kept provider's recent answers
         self.master = rosgraph.Master(rospy.names.get_caller_id())
@@ -107,6 +106,7 @@ class MovableServiceProxy:
                 if problem is not None:
                     return False, (problem if result is None else result), (time.time() if result is None else sent)
                 self._keep(rospy.ServiceProxy(self.name, self.service_class, persistent=True))
+            first = self.proxy
             done, result, sent, proxy = self._ask(deadline, args)
             if done and not refused(result):
                 self.avoid = None
@@ -120,7 +120,7 @@ class MovableServiceProxy:
             # a kept connection that broke is looked up and made again before its provider is avoided (the
             # provider may be the same, e.g. the other end dropped an idle connection); a refusal, or a fresh
             # connection that fails, is not asked again until the name moves
-            stale = kept and proxy is self.kept_proxy and not done and not refused(result)
+            stale = kept and proxy is first and not done and not refused(result)
             self.avoid = None if stale else proxy.uri   # (set by the lookup the call made; None: not looked up)
 
     def _keep(self, proxy: rospy.ServiceProxy) -> None:
@@ -131,7 +131,6 @@ class MovableServiceProxy:
             if self.proxy is None or proxy.uri != self.proxy.uri:
                 self.answer_times.clear()
             self.proxy = proxy
-        self.kept_proxy = proxy
 
     def _hedge_delay(self) -> float:
         """How long a request may go unanswered before the name is looked up: twice the median of the provider's
