@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import os
+import threading
+import time
 
 import rospy
 
@@ -115,31 +117,44 @@ def quiet_at_shutdown(callback):
     return wrapper
 
 
+class BackgroundCall:
+    """``func(*args, **kwargs)`` running in a daemon thread of its own (rospy's service calls have no timeout:
+    a call that overruns is abandoned, not interrupted; its thread ends when rospy gives up on the connection).
+    ``func`` is what it calls. ``finished`` is set, and ``wake`` (if given) too, once it has returned: ``done`` True and ``result`` its
+    value, or ``done`` False and ``result`` the exception it raised. ``sent`` (wall) and ``started`` (monotonic)
+    say when it began, ``took`` how long it ran [s]."""
+
+    def __init__(self, func, *args, wake=None, **kwargs) -> None:
+        self.func = func
+        self.done = False
+        self.result = None
+        self.took = 0.0
+        self.finished = threading.Event()
+        self.sent, self.started = time.time(), time.monotonic()
+        self._wake = wake
+        threading.Thread(target=self._run, args=(args, kwargs), name='background_call', daemon=True).start()
+
+    def _run(self, args, kwargs) -> None:
+        try:
+            self.result = self.func(*args, **kwargs)
+            self.done = True
+        except Exception as exc:          # reported to the caller, who decides
+            self.result = exc
+        self.took = time.monotonic() - self.started
+        self.finished.set()
+        if self._wake is not None:
+            self._wake.set()
+
+
 def call_with_timeout(func, timeout: float, *args, **kwargs):
     """Call ``func(*args, **kwargs)`` (e.g. a ``rospy.ServiceProxy`` to a module on another host), giving up
-    after ``timeout`` wall seconds: the robot never waits on the cloud.
-
-    rospy's service calls have no timeout of their own (a connection to an unreachable host can block for
-    minutes), so the call runs in a daemon thread; a call that overruns is abandoned, not interrupted (its
-    thread ends when rospy gives up on the connection).
+    after ``timeout`` wall seconds: the robot never waits on the cloud. The call runs as a
+    :class:`BackgroundCall`; one that overruns is abandoned.
 
     Returns:
         ``(True, result)``, or ``(False, exception)`` for an exception or ``TimeoutError`` on a timeout.
     """
-    import threading
-    box: dict = {}
-
-    def run() -> None:
-        try:
-            box['result'] = func(*args, **kwargs)
-        except Exception as exc:          # reported to the caller, who decides
-            box['error'] = exc
-
-    worker = threading.Thread(target=run, name='call_with_timeout', daemon=True)
-    worker.start()
-    worker.join(timeout)
-    if worker.is_alive():
+    call = BackgroundCall(func, *args, **kwargs)
+    if not call.finished.wait(timeout):
         return False, TimeoutError(f'no answer within {timeout:g} s')
-    if 'error' in box:
-        return False, box['error']
-    return True, box['result']
+    return call.done, call.result

@@ -31,6 +31,8 @@ from typing import Any, Deque, Optional, Tuple
 import rosgraph
 import rospy
 
+from cnr_params.ros import BackgroundCall
+
 NOT_ACTIVE = 'not the active instance'     # how a managed instance that is not active refuses a request
 LOOKUP_POLL = 0.02                         # s between two lookups while the name has not moved yet
 HEDGE_AFTER = 0.05                         # s a request stays unanswered at least before the name is looked up
@@ -43,31 +45,6 @@ def refused(result: Any) -> bool:
     if isinstance(result, Exception):
         return NOT_ACTIVE in str(result)
     return getattr(result, 'success', True) is False and str(getattr(result, 'message', '')).startswith(NOT_ACTIVE)
-
-
-class _Attempt:
-    """One request in a thread of its own (rospy's service calls have no timeout; an unanswered one is abandoned,
-    its connection closed)."""
-
-    def __init__(self, proxy: rospy.ServiceProxy, args: Tuple[Any, ...], wake: threading.Event) -> None:
-        self.proxy = proxy
-        self.done = False                   # answered (``result`` the answer), else ``result`` the exception
-        self.result: Any = None
-        self.finished = threading.Event()
-        self.sent = time.time()
-        self.started = time.monotonic()
-        self.took = 0.0
-        threading.Thread(target=self._run, args=(args, wake), name='movable_service_call', daemon=True).start()
-
-    def _run(self, args: Tuple[Any, ...], wake: threading.Event) -> None:
-        try:
-            self.result = self.proxy(*args)
-            self.done = True
-        except Exception as exc:            # reported to the caller, who decides
-            self.result = exc
-        self.took = time.monotonic() - self.started
-        self.finished.set()
-        wake.set()
 
 
 class MovableServiceProxy:
@@ -150,9 +127,9 @@ class MovableServiceProxy:
             refusal or a failure), else ``(False, TimeoutError, sent, kept proxy)`` at the deadline.
         """
         wake = threading.Event()
-        attempts = [_Attempt(self.proxy, args, wake)]
+        attempts = [BackgroundCall(self.proxy, *args, wake=wake)]
         hedge_at = time.monotonic() + self._hedge_delay()
-        ended: Optional[_Attempt] = None
+        ended: Optional[BackgroundCall] = None
         while True:
             wake.clear()
             for attempt in attempts:
@@ -160,29 +137,28 @@ class MovableServiceProxy:
                     if attempt.done and not refused(attempt.result):
                         for other in attempts:
                             if other is not attempt:
-                                other.proxy.close()      # (an unanswered request there is abandoned)
-                        if attempt.proxy is self.proxy:
+                                other.func.close()      # (an unanswered request there is abandoned)
+                        if attempt.func is self.proxy:
                             self.answer_times.append(attempt.took)
-                        return True, attempt.result, attempt.sent, attempt.proxy
+                        return True, attempt.result, attempt.sent, attempt.func
                     ended = attempt
-            pending = [a for a in attempts if not a.finished.is_set()]
-            if not pending:
+            if all(a.finished.is_set() for a in attempts):
                 for other in attempts:
                     if other is not ended:
-                        other.proxy.close()
-                return ended.done, ended.result, ended.sent, ended.proxy
+                        other.func.close()
+                return ended.done, ended.result, ended.sent, ended.func
             now = time.monotonic()
             if now >= deadline:
                 for other in attempts[1:]:
-                    other.proxy.close()
+                    other.func.close()
                 first = attempts[0]
-                return False, TimeoutError(f'no answer within {deadline - first.started:.3g} s'), first.sent, first.proxy
+                return False, TimeoutError(f'no answer within {deadline - first.started:.3g} s'), first.sent, first.func
             if len(attempts) == 1 and now >= hedge_at:
                 uri = self._lookup()
-                asked = attempts[0].proxy.uri
+                asked = attempts[0].func.uri
                 if uri is not None and asked is not None and uri != asked and uri != self.avoid:
-                    attempts.append(_Attempt(rospy.ServiceProxy(self.name, self.service_class, persistent=True),
-                                             args, wake))
+                    hedge = rospy.ServiceProxy(self.name, self.service_class, persistent=True)
+                    attempts.append(BackgroundCall(hedge, *args, wake=wake))
                 hedge_at = now + HEDGE_POLL
             wake.wait(max(0.0, min(deadline, hedge_at if len(attempts) == 1 else deadline) - now))
 
