@@ -255,7 +255,7 @@ def test_report_files(tmp_path):
     assert path_length([(0, 0), (3, 4)]) == 5.0
 
 
-# -- mfg's local fallback goals and cnr_params.ros.call_with_timeout ------------------------------------
+# -- mfg's local fallback goals and cnr_runtime.call_with_timeout ------------------------------------
 def test_local_goals_pick_the_least_recently_measured_cell_not_the_robots():
     from cnr_maps.grid import MapcellGrid
     from mfg.core.fallback import LocalGoals
@@ -274,7 +274,7 @@ def test_local_goals_pick_the_least_recently_measured_cell_not_the_robots():
 def test_call_with_timeout_returns_results_errors_and_gives_up_in_time():
     import threading
     import time
-    from cnr_params.ros import call_with_timeout
+    from cnr_runtime import call_with_timeout
     assert call_with_timeout(lambda a, b: a + b, 1.0, 2, 3) == (True, 5)
     ok, err = call_with_timeout(lambda: 1 / 0, 1.0)
     assert not ok and isinstance(err, ZeroDivisionError)

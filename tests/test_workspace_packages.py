@@ -142,7 +142,7 @@ def _callbacks_that_publish(path: str):
 def test_every_callback_that_publishes_is_quiet_at_shutdown():
     """A subscriber callback or service handler that publishes can meet a topic the shutdown just closed
     (``publish() to a closed topic``); rospy would log that with a traceback at every mission's end (seen in CI
-    with the merger). Each such callback is wrapped in ``cnr_params.ros.quiet_at_shutdown``."""
+    with the merger). Each such callback is wrapped in ``cnr_runtime.quiet_at_shutdown``."""
     bare = []
     for pkg_dir in PACKAGES.values():
         for dirpath, _dirs, files in os.walk(os.path.join(pkg_dir, 'src')):

@@ -24,7 +24,8 @@ from std_msgs.msg import Header
 
 from cnr_msgs.srv import Echo, EchoResponse
 from cnr_params import exit_on_config_error
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
+from cnr_runtime import init_node
 
 MODES = ('topic', 'service', 'service_persistent')
 

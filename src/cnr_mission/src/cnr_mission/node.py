@@ -29,7 +29,8 @@ from cnr_msgs.msg import (BatteryEnergy, CellStates, Hotspot, MergedMeasurement,
                           NetworkProfile, Placement, SearchState, StoreForwardStatus, TaskDecision)
 from cnr_msgs.srv import Decide, EvaluateTask, GetMeasurements
 from cnr_params import ConfigError
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
+from cnr_runtime import init_node
 from kestrel_driver.core.field import TemperatureField
 
 

@@ -32,7 +32,8 @@ from cnr_msgs.msg import TaskDecision
 from cnr_msgs.srv import Decide, EvaluateTask, Teleport
 from cnr_navigation.goal_sequencer import wait_for_server
 from cnr_params import ConfigError, Section
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
+from cnr_runtime import init_node
 
 FAILED_STATES = (GoalStatus.ABORTED, GoalStatus.REJECTED, GoalStatus.LOST, GoalStatus.RECALLED,
                  GoalStatus.PREEMPTED)

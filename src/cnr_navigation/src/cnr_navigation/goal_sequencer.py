@@ -16,7 +16,7 @@ from typing import List
 
 import cnr_params
 from cnr_params import ConfigError, Section
-from cnr_params.ros import init_node
+from cnr_runtime import init_node
 
 
 @dataclass

@@ -31,7 +31,7 @@ from nav_msgs.srv import GetPlan, GetPlanResponse
 from std_srvs.srv import Empty, EmptyResponse
 
 import cnr_params
-from cnr_params.ros import init_node, quiet_at_shutdown
+from cnr_runtime import init_node, quiet_at_shutdown
 from cnr_navigation.action_server import TakeoverActionServer
 from cnr_navigation.cfg import DWAPlannerConfig, MoveBaseConfig
 from cnr_navigation.core.dwa import DWAController

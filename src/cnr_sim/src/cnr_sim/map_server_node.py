@@ -12,7 +12,8 @@ from nav_msgs.msg import MapMetaData, OccupancyGrid
 from nav_msgs.srv import GetMap, GetMapResponse
 
 import cnr_params
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
+from cnr_runtime import init_node
 from cnr_maps.mapio import OccupancyMap, load_map
 from cnr_sim.node import yaw_quaternion
 

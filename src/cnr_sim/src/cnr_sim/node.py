@@ -29,7 +29,8 @@ from cnr_maps.mapio import load_map
 from cnr_maps.pose import Pose2D, yaw_to_quaternion
 from cnr_msgs.msg import BatteryEnergy, Collision, MigrationLease
 from cnr_msgs.srv import Teleport, TeleportResponse
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
+from cnr_runtime import init_node
 from cnr_sim.core.battery import BatteryModel, NetMeter, cpu_meter
 from cnr_sim.core.depth_camera import POINT_STEP
 from cnr_sim.core.fence import CommandFence
@@ -343,7 +344,7 @@ class SimulatorNode:
         while not rospy.is_shutdown():
             with self.lock:
                 event = self.world.step()
-                self.publish(event)     # at shutdown, may raise on a closed topic: see cnr_params.ros.init_node
+                self.publish(event)     # at shutdown, may raise on a closed topic: see cnr_runtime.init_node
                 sim = self.world.time
             if rtf > 0:
                 target = wall0 + (sim - sim0) / rtf

@@ -19,7 +19,8 @@ import rospy
 
 from cnr_msgs.msg import StoreForwardAck, StoreForwardBatch, StoreForwardStatus
 from cnr_params import exit_on_config_error
-from cnr_params.ros import init_node, private_section, quiet_at_shutdown
+from cnr_params.ros import private_section
+from cnr_runtime import init_node, quiet_at_shutdown
 from cnr_store_forward.core import config as sf_config
 from cnr_store_forward.core.receiver import Receiver
 from cnr_store_forward.wire import RELAY_HEADER, raw_message, raw_message_class, ros_time

@@ -16,7 +16,8 @@ import rospy
 
 from cnr_msgs.msg import StoreForwardAck, StoreForwardBatch, StoreForwardRecord, StoreForwardStatus
 from cnr_params import exit_on_config_error
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
+from cnr_runtime import init_node
 from cnr_store_forward.core import config as sf_config
 from cnr_store_forward.core.queue import DiskQueue, QueueError, Record
 from cnr_store_forward.core.sender import Sender

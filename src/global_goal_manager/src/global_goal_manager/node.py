@@ -16,7 +16,8 @@ from cnr_maps.grid import MapcellGrid
 from cnr_maps.pose import yaw_to_quaternion
 from cnr_msgs.msg import CellStates
 from cnr_msgs.srv import NextGoal, NextGoalResponse
-from cnr_params.ros import init_node, private_section, quiet_at_shutdown
+from cnr_params.ros import private_section
+from cnr_runtime import init_node, quiet_at_shutdown
 from global_goal_manager.core.policies import CellView, GoalManagerParams, read_params
 from migration_manager.client import NOT_ACTIVE
 from migration_manager.instance import Hooks, ManagedInstance, Retiring

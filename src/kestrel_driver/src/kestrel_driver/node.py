@@ -18,7 +18,8 @@ from sensor_msgs.msg import Temperature
 
 import cnr_params
 from cnr_params import Section
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
+from cnr_runtime import init_node
 from kestrel_driver.core.field import TemperatureField
 from kestrel_driver.core.parser import ParseError, parse_line
 from kestrel_driver.core.sensor import LagCorrector, LaggedSensor

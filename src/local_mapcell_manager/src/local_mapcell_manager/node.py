@@ -20,7 +20,8 @@ from cnr_msgs.srv import (GetCell, GetCellResponse, GetCellStates, GetCellStates
                           GetMeasurementsResponse, GetRecentMeasurements)
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.measurements import Measurement
-from cnr_params.ros import call_with_timeout, init_node, private_section, quiet_at_shutdown
+from cnr_params.ros import private_section
+from cnr_runtime import call_with_timeout, init_node, quiet_at_shutdown
 from local_mapcell_manager.core.ledger import DUPLICATE, Ledger, Prepared, Reading, Replay, state_newest
 from local_mapcell_manager.core.params import ManagerParams, read_params
 from local_mapcell_manager.core.store import CellBook, MeasurementStore

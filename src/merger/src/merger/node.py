@@ -16,7 +16,8 @@ from cnr_maps.pose import quaternion_to_yaw
 from cnr_msgs.msg import MergedMeasurement
 from cnr_msgs.srv import GetRecentMeasurements, GetRecentMeasurementsResponse
 from cnr_params import Section
-from cnr_params.ros import init_node, private_section, quiet_at_shutdown
+from cnr_params.ros import private_section
+from cnr_runtime import init_node, quiet_at_shutdown
 from merger.core.nearest import NearestMerger
 from merger.core.retention import Retention
 

@@ -28,7 +28,8 @@ from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, MfgActivity, Se
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.pose import yaw_to_quaternion
 from cnr_msgs.srv import NextGoal, NextGoalResponse
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
+from cnr_runtime import init_node
 from mfg.core.fallback import LocalGoals
 from mfg.core.memory import Goal, Memory
 from mfg.core.params import MfgParams, read_params

@@ -25,7 +25,8 @@ from cnr_harness.process import Proc, stop_process
 from cnr_msgs.msg import AgentHealth
 from cnr_msgs.srv import AgentCommand, AgentCommandResponse
 from cnr_params.config import EXIT_CONFIG
-from cnr_params.ros import init_node, private_section, quiet_at_shutdown
+from cnr_params.ros import private_section
+from cnr_runtime import init_node, quiet_at_shutdown
 from migration_manager.core.config import from_section
 from migration_manager.instance_launch import LaunchError, NodeLaunch, resolve
 

@@ -31,7 +31,7 @@ from typing import Any, Deque, Optional, Tuple
 import rosgraph
 import rospy
 
-from cnr_params.ros import BackgroundCall
+from cnr_runtime import BackgroundCall
 
 NOT_ACTIVE = 'not the active instance'     # how a managed instance that is not active refuses a request
 LOOKUP_POLL = 0.02                         # s between two lookups while the name has not moved yet

@@ -2,7 +2,7 @@
 move_base) uses to be started as a standby, promoted, frozen and fenced by the migration manager.
 
 A node creates one :class:`ManagedInstance` with its :class:`Hooks` before its first subscriber, or calls
-:func:`prepare_process` before it (see :func:`cnr_params.ros.distinct_callerid`). When the node runs without a migration
+:func:`prepare_process` before it (see :func:`cnr_runtime.distinct_callerid`). When the node runs without a migration
 manager (``~migration/role`` empty or absent: every single-master and fixed-placement run) the instance is
 *unmanaged*: always active, no extra topics. Managed, it follows the lease protocol of
 :mod:`migration_manager.core.lease`:
@@ -43,7 +43,8 @@ import rospy
 
 from cnr_msgs.msg import InstanceStatus, MigrationLease, MigrationRenew, ModuleState
 from cnr_msgs.srv import InstanceControl, InstanceControlResponse
-from cnr_params.ros import call_with_timeout, distinct_callerid, private_section, quiet_at_shutdown
+from cnr_params.ros import private_section
+from cnr_runtime import call_with_timeout, distinct_callerid, quiet_at_shutdown
 from std_srvs.srv import Empty
 from migration_manager.core import state as state_codec
 from migration_manager.core.config import MigrationConfig, from_section
@@ -126,7 +127,7 @@ def topic(module: str, leaf: str) -> str:
 
 def prepare_process(namespace: str = '~migration') -> bool:
     """For a node that creates subscribers before its :class:`ManagedInstance`: if it runs managed, give its
-    subscriptions their per-host caller id now (see :func:`cnr_params.ros.distinct_callerid`). Returns whether it
+    subscriptions their per-host caller id now (see :func:`cnr_runtime.distinct_callerid`). Returns whether it
     runs managed. Idempotent; :class:`ManagedInstance` calls it too."""
     role = rospy.get_param(f'{namespace}/role', '')
     if role:

@@ -17,7 +17,8 @@ import rospy
 import cnr_params
 from cnr_msgs.msg import AgentHealth, InstanceStatus, MigrationEvent, MigrationLease, MigrationRenew, ModuleState, Placement
 from cnr_msgs.srv import AgentCommand, InstanceControl, Migrate, MigrateResponse
-from cnr_params.ros import call_with_timeout, init_node, private_section, quiet_at_shutdown
+from cnr_params.ros import private_section
+from cnr_runtime import call_with_timeout, init_node, quiet_at_shutdown
 from migration_manager.core import state as state_codec
 from migration_manager.core.config import from_section
 from migration_manager.core.priority import Elevator

@@ -28,7 +28,8 @@ from move_base_msgs.msg import MoveBaseActionResult
 import cnr_params
 from cnr_msgs.msg import InstanceStatus
 from cnr_msgs.srv import NextGoal
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
+from cnr_runtime import init_node
 from migration_manager.client import MovableServiceProxy
 from migration_manager.instance import INSTANCE_HEADER
 

@@ -12,7 +12,8 @@ import rospy
 import cnr_params
 from cnr_msgs.msg import LinkQuality, Placement
 from cnr_msgs.srv import Migrate
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
+from cnr_runtime import init_node
 from migration_manager.core.config import from_section
 from migration_manager.core.rule import PlacementRule, rule_from_section
 

@@ -18,7 +18,8 @@ import rospy
 
 from cnr_msgs.msg import LinkQuality
 from cnr_params import exit_on_config_error
-from cnr_params.ros import init_node, private_section
+from cnr_params.ros import private_section
+from cnr_runtime import init_node
 from std_srvs.srv import Empty, EmptyResponse
 from multimaster_bridge.core import config as bridge_config
 from multimaster_bridge.core import protocol, sync

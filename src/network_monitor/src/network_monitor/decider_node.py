@@ -24,7 +24,8 @@ import cnr_params
 from cnr_msgs.msg import NetworkProfile, Placement, TaskDecision
 from cnr_msgs.srv import (Decide, DecideResponse, EvaluateTask, EvaluateTaskResponse, Migrate, ProfileNow)
 from cnr_params import ConfigError, Section
-from cnr_params.ros import init_node, private_section, quiet_at_shutdown
+from cnr_params.ros import private_section
+from cnr_runtime import init_node, quiet_at_shutdown
 from network_monitor.core.advisor import REDECISION, AdvisorError, Profile, RunningTask, TaskAdvisor
 from network_monitor.core.decision import Decision
 from network_monitor.core.decision_config import decision_config

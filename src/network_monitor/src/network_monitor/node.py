@@ -21,7 +21,8 @@ from std_msgs.msg import Header
 from cnr_msgs.msg import LinkQuality, NetworkProfile
 from cnr_msgs.srv import ProfileNow, ProfileNowResponse
 from cnr_params import exit_on_config_error
-from cnr_params.ros import init_node, private_section, quiet_at_shutdown
+from cnr_params.ros import private_section
+from cnr_runtime import init_node, quiet_at_shutdown
 from network_monitor.core import config as monitor_config
 from network_monitor.core.echo import EchoStats, LinkSample, link_state
 from network_monitor.core.estimate import BandwidthEstimator, r_bw

@@ -1,4 +1,4 @@
-"""cnr_params.ros.quiet_at_shutdown: a ROSException ends a callback quietly only once the shutdown has begun.
+"""cnr_runtime.quiet_at_shutdown: a ROSException ends a callback quietly only once the shutdown has begun.
 
 Runs in a child interpreter, because a rospy shutdown cannot be undone in this one (no master needed)."""
 import subprocess
@@ -10,7 +10,7 @@ pytest.importorskip('rospy')
 
 SCRIPT = r'''
 import rospy, rospy.core
-from cnr_params.ros import quiet_at_shutdown
+from cnr_runtime import quiet_at_shutdown
 
 @quiet_at_shutdown
 def publish_onto_closed_topic():
