@@ -8,7 +8,7 @@
 # (exp_control.sh) and root; uses the default testbed. Rows are appended as measured; run it again to resume.
 # About 66 s per condition (100 conditions in 1.83 h, 2026-11-26). --slowdown S: the robot's CPU capped at 1/S
 # instead of config/testbed.yaml's (a copy of config/ in <out>/slowdown_<S>), with the control values of
-# exp_control.sh --slowdown S (config/control_values_slowdown<S>.yaml).
+# exp_control.sh --slowdown S (docs/results/control/control_values_slowdown<S>.yaml).
 #
 #   launch_scripts/exp_campaign.sh [--conditions 100] [--seed 1] [--out DIR] [--test-fraction 0.3]
 #                                  [--rtt-min 0 --rtt-max 200 --rate-min 0.5 --rate-max 50 --loss-min 0

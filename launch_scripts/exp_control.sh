@@ -10,7 +10,7 @@
 # then), with the link of --link-map (default config/link_map_<location>.yaml); about 4 minutes each.
 #
 # --slowdown S measures them with the robot's CPU capped at 1/S (default config/testbed.yaml's robot_cpu.slowdown):
-# written to config/control_values_slowdown<S>.yaml, rows in bench_results/control/<task>@<location>_slowdown<S>.
+# written to docs/results/control/control_values_slowdown<S>.yaml, rows in bench_results/control/<task>@<location>_slowdown<S>.
 # --from-rows FILE runs nothing: the control values of the all-local runs of a results TSV, e.g. the onload runs
 # of exp_local_remote.sh (bench_results/local_remote/slowdown_<S>/results.tsv: the same task, every module local).
 #

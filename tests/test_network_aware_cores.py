@@ -331,7 +331,7 @@ def test_a_slowdown_has_its_own_results_control_values_and_config_copy(tmp_path)
     from cnr_testbed.core.config import load_testbed
     a = script.parse_args(['control', '--slowdown', '6'])
     assert a.out.endswith('control/corridor_round_trip@corridor_slowdown6')
-    assert a.control_values.endswith('config/control_values_slowdown6.yaml')
+    assert a.control_values.endswith('docs/results/control/control_values_slowdown6.yaml')
     assert script.parse_args(['campaign']).control_values.endswith('config/control_values.yaml')
     lr = script.parse_args(['local_remote'])
     default = load_testbed(os.path.join(script.report.WS, 'config', 'testbed.yaml')).robot_cpu.slowdown

@@ -293,7 +293,7 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
             p.add_argument('--slowdown', type=float, default=None,
                            help="the robot's CPU slowdown (default config/testbed.yaml's); another one runs on a "
                                 "copy of config/ in <out>/slowdown_<s> and its control values default to "
-                                "config/control_values_slowdown<s>.yaml")
+                                "docs/results/control/control_values_slowdown<s>.yaml")
         if name == 'control':
             p.add_argument('--runs', type=int, default=20)
             p.add_argument('--from-rows', default=None,
@@ -326,7 +326,8 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
     elif args.slowdown is not None and args.slowdown < 1.0:
         ap.error(f'--slowdown: expected a number >= 1 (1 = a whole core), got {args.slowdown:g}')
     if args.control_values is None:
-        args.control_values = os.path.join(report.WS, 'config', f'control_values{suffix}.yaml')
+        args.control_values = (os.path.join(report.WS, 'docs', 'results', 'control', f'control_values{suffix}.yaml')
+                               if suffix else os.path.join(report.WS, 'config', 'control_values.yaml'))
     args.out = os.path.abspath(args.out)
     if getattr(args, 'runs', 2) < 2 or getattr(args, 'conditions', 1) < 1:
         ap.error('--runs must be >= 2 and --conditions >= 1')
