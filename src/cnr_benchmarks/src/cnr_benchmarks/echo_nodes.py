@@ -14,7 +14,6 @@ atomically at the end.
 """
 from __future__ import annotations
 
-import os
 import threading
 import time
 from typing import List
@@ -24,6 +23,7 @@ from std_msgs.msg import Header
 
 from cnr_msgs.srv import Echo, EchoResponse
 from cnr_params import exit_on_config_error
+from cnr_params.files import write_atomic
 from cnr_params.ros import private_section
 from cnr_runtime import init_node
 
@@ -105,9 +105,5 @@ def client_main() -> None:
         print(f'{mode} sample {seq}/{samples}: {rtt:.2f} ms', flush=True)
         time.sleep(interval)
     if output:
-        tmp = f'{output}.tmp{os.getpid()}'
-        with open(tmp, 'w') as f:
-            f.write('seq\trtt_ms\n')
-            f.writelines(f'{i}\t{r:.3f}\n' for i, r in enumerate(rtts, 1))
-        os.replace(tmp, output)
+        write_atomic(output, 'seq\trtt_ms\n' + ''.join(f'{i}\t{r:.3f}\n' for i, r in enumerate(rtts, 1)))
     raise SystemExit(0 if rtts and all(r == r for r in rtts) else 1)

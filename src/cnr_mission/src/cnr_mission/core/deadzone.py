@@ -14,6 +14,7 @@ from typing import Dict, List, Optional, Sequence
 import numpy as np
 
 from cnr_maps.measurements import read_tsv
+from cnr_params.files import write_atomic
 
 # mode: (placement, link map): the two modes of the paper, with the dead zone cutting both directions (the
 # issue's Wi-Fi-only-at-the-ends corridor), and the paper's "normal" run as it describes it (sensor data does
@@ -153,12 +154,8 @@ def write_outputs(out: str, runs: Sequence[Run], command: str) -> str:
     """runs.tsv, deadzone.md and deadzone.png in ``out``; returns the markdown."""
     rows = [r.row() for r in runs]
     if rows:
-        tmp = os.path.join(out, 'runs.tsv.tmp')
-        with open(tmp, 'w') as f:
-            f.write('\t'.join(rows[0]) + '\n')
-            for r in rows:
-                f.write('\t'.join('' if v is None else str(v) for v in r.values()) + '\n')
-        os.replace(tmp, os.path.join(out, 'runs.tsv'))
+        write_atomic(os.path.join(out, 'runs.tsv'), '\t'.join(rows[0]) + '\n' + ''.join(
+            '\t'.join('' if v is None else str(v) for v in r.values()) + '\n' for r in rows))
         plot(runs, os.path.join(out, 'deadzone.png'))
     md = '\n'.join(['# Dead-zone experiment (thesis Appendix VI, Fig. 11)', '', f'Command: `{command}`', '',
                     'Corridor 2 m × 12 m, heaters at x = 8.3 and 8.9 m by the upper wall, Wi-Fi only for x ≤ 1.5 m '

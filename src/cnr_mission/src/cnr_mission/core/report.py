@@ -10,14 +10,14 @@ Files written into the report folder:
 """
 from __future__ import annotations
 
-import json
 import math
-import os
 from collections import Counter
 from dataclasses import dataclass
 from typing import Dict, Optional, Sequence, Tuple
 
 import numpy as np
+
+from cnr_params.files import write_json
 
 
 @dataclass
@@ -50,10 +50,7 @@ def write_summary(path: str, summary: Dict) -> None:
         if isinstance(v, list):
             return [clean(x) for x in v]
         return v
-    tmp = path + '.tmp'
-    with open(tmp, 'w') as f:
-        json.dump(clean(summary), f, indent=2)
-    os.replace(tmp, path)
+    write_json(path, clean(summary), indent=2, sort_keys=False)
 
 
 def render_png(path: str, cells: Sequence[CellSummary], trajectory: Sequence[Tuple[float, float]],

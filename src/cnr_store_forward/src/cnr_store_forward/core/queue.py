@@ -44,7 +44,7 @@ from array import array
 from dataclasses import dataclass
 from typing import Any, Dict, List, Optional
 
-from cnr_store_forward.core.files import fsync_directory, read_json, write_json
+from cnr_params.files import fsync_directory, read_json, write_json
 
 FORMAT = 1
 MAGIC = b'CNRSFQ1\n'

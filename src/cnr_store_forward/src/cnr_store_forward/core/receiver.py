@@ -18,7 +18,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import List, Sequence, Tuple
 
-from cnr_store_forward.core.files import read_json, write_json
+from cnr_params.files import read_json, write_json
 
 RETIRED_KEPT = 64           # retired epochs remembered (one per re-created sender queue)
 

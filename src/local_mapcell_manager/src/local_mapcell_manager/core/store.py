@@ -20,6 +20,7 @@ from typing import Callable, List, Optional, Sequence
 
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.measurements import HEADER_LINE, Measurement, format_row, is_header, parse_row
+from cnr_params.files import fsync_directory
 
 
 @dataclass
@@ -210,11 +211,7 @@ class Draft:
         except BaseException:
             self.discard()
             raise
-        dir_fd = os.open(directory, os.O_RDONLY)
-        try:
-            os.fsync(dir_fd)                       # the rename itself survives a crash
-        finally:
-            os.close(dir_fd)
+        fsync_directory(directory)                 # the rename itself survives a crash
         self.store._needs_newline = False
 
     def discard(self) -> None:

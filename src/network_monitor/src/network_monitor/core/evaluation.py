@@ -39,13 +39,13 @@ from __future__ import annotations
 import datetime
 import math
 import os
-import tempfile
 from dataclasses import dataclass
 from typing import Any, Dict
 
 import yaml
 
 from cnr_params import Section, load_yaml
+from cnr_params.files import write_atomic
 
 OFFLOAD = 'offload'
 ONLOAD = 'onload'
@@ -185,16 +185,5 @@ def write_control_values(path: str, values: ControlValues) -> None:
     text = ('# Control values for Eq. 4-5 (thesis §4.2.6, Table 4-5): every module on the robot, per task.\n'
             '# Written by the control experiment (exp_control.sh); ct in s, cb in battery fraction (0..1).\n'
             + yaml.safe_dump(dict(sorted(data.items())), default_flow_style=False, sort_keys=False))
-    directory = os.path.dirname(os.path.abspath(path))
-    fd, tmp = tempfile.mkstemp(prefix='.control_values.', dir=directory)
-    try:
-        with os.fdopen(fd, 'w', encoding='utf-8') as stream:
-            stream.write(text)
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    write_atomic(path, text, durable=True)
 

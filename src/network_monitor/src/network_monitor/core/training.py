@@ -44,10 +44,10 @@ import fcntl
 import math
 import os
 import re
-import tempfile
 from dataclasses import dataclass, fields
 from typing import Callable, Dict, List, Sequence, Tuple
 
+from cnr_params.files import fsync_directory, write_atomic
 from network_monitor.core.evaluation import COMPLETED, DECISIONS, MISSION_STATUSES, label_for
 
 PROFILE_METHODS = ('probe', 'passive')
@@ -289,14 +289,6 @@ def read_rows(path: str) -> Tuple[List[Row], List[str]]:
     return rows, warnings
 
 
-def _fsync_dir(directory: str) -> None:
-    fd = os.open(directory, os.O_RDONLY)
-    try:
-        os.fsync(fd)
-    finally:
-        os.close(fd)
-
-
 def _write_all(fd: int, data: bytes) -> None:
     while data:
         data = data[os.write(fd, data):]
@@ -335,7 +327,7 @@ def append_rows(path: str, rows: Sequence[Row]) -> None:
     finally:
         os.close(fd)
     if created:
-        _fsync_dir(directory)
+        fsync_directory(directory)
 
 
 class TrainingSet:
@@ -368,20 +360,7 @@ def export_set(source: str, destination: str) -> List[str]:
     rows, warnings = read_rows(source)
     directory = os.path.dirname(os.path.abspath(destination))
     os.makedirs(directory, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix='.export.', suffix=SUFFIX, dir=directory)
-    try:
-        with os.fdopen(fd, 'w', encoding='utf-8', newline='') as stream:
-            stream.write(HEADER + '\n')
-            for r in rows:
-                stream.write(format_row(r) + '\n')
-            stream.flush()
-            os.fsync(stream.fileno())
-        os.replace(tmp, destination)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
-    _fsync_dir(directory)
+    write_atomic(destination, HEADER + '\n' + ''.join(format_row(r) + '\n' for r in rows), durable=True)
     return warnings
 
 
