@@ -7,7 +7,9 @@ fixtures; process output goes to ``build/test_logs``.
 """
 from __future__ import annotations
 
+import inspect
 import os
+import re
 
 import pytest
 
@@ -39,3 +41,54 @@ def ros():
 @pytest.fixture(scope='session')
 def workspace() -> str:
     return WS
+
+
+# -- the fast tier ---------------------------------------------------------------------------------------------------
+# A test is ``integration`` when it (or a fixture it uses) starts a master, a node, a launch, any other process, or
+# needs the testbed (root); every other test is a ROS-free unit test of a core and runs in ``run_tests.sh --fast``.
+_STARTS_SOMETHING = re.compile(
+    r'\bros\b\s*[,)]|RosMaster|roslaunch|rosrun|launch_scripts|catkin_make|subprocess|Popen|spawn|Testbed|testbed'
+    r'|netns|\bProc\b|require_root|geteuid|rospy\.init_node|ros\.master')
+
+
+def _sources(item) -> list:
+    sources = []
+    func = getattr(item, 'function', None)
+    if func is not None:
+        sources.append(func)
+    for name in item.fixturenames:
+        for fixturedef in item._fixtureinfo.name2fixturedefs.get(name, ()):
+            module = getattr(fixturedef.func, '__module__', '') or ''
+            if not module.startswith('_pytest'):
+                sources.append(fixturedef.func)
+    # and the test module's own helpers they call, transitively
+    module = getattr(item, 'module', None)
+    helpers = {name: obj for name, obj in vars(module).items()
+               if inspect.isfunction(obj) and obj.__module__ == module.__name__} if module else {}
+    seen = set()
+    while sources:
+        obj = sources.pop()
+        if obj in seen:
+            continue
+        seen.add(obj)
+        try:
+            text = inspect.getsource(obj)
+        except (OSError, TypeError):
+            continue
+        for name, helper in helpers.items():
+            if helper not in seen and re.search(rf'\b{name}\b', text):
+                sources.append(helper)
+    texts = []
+    for obj in seen:
+        try:
+            texts.append(inspect.getsource(obj))
+        except (OSError, TypeError):
+            continue
+    return texts
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    for item in items:
+        if item.get_closest_marker('integration') is None and any(
+                _STARTS_SOMETHING.search(text) for text in _sources(item)):
+            item.add_marker(pytest.mark.integration)
