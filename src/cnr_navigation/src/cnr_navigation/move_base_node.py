@@ -3,48 +3,84 @@
 Interface as move_base (navigation@noetic-devel ``move_base.cpp``); see the package README for
 the full list of topics, services and parameters.
 
-Movable by migration_manager (README "Migration state"): as a managed standby the costmaps follow the sensors
-but the node has no action server, no services and publishes nothing; on promotion the client's goal is taken
-over with its goal id (:mod:`cnr_navigation.action_server`) and continues; frozen, the node stops commanding at
-once and leaves the goal to the next instance without a terminal status.
+The node runs on its own (:meth:`MoveBaseNode.start` without a gate: always active). What makes it movable by
+migration_manager (standby, promotion with the client's goal, freeze, dormancy) is the adapter in
+:mod:`cnr_navigation.move_base_migration`, which wraps the node and gives it its managed instance as the
+:class:`OutputGate`.
 """
 from __future__ import annotations
 
 import dataclasses
-import math
 import threading
 import time
 from collections import deque
-from typing import Any, Callable, Deque, Dict, List, Optional, Tuple
+from typing import Callable, Deque, Dict, List, Optional, Protocol, Tuple
 
 import numpy as np
 import rospy
 import tf2_ros
-from actionlib_msgs.msg import GoalStatus
 from dynamic_reconfigure.server import Server as ReconfigureServer
 from dynamic_reconfigure.srv import Reconfigure as ReconfigureSrv
 from geometry_msgs.msg import PoseStamped, Twist
-from move_base_msgs.msg import (MoveBaseAction, MoveBaseActionGoal, MoveBaseFeedback, MoveBaseGoal,
-                                RecoveryStatus)
+from move_base_msgs.msg import MoveBaseAction, MoveBaseActionGoal, MoveBaseFeedback, MoveBaseGoal, RecoveryStatus
 from nav_msgs.msg import Odometry, Path
 from nav_msgs.srv import GetPlan, GetPlanResponse
 from std_srvs.srv import Empty, EmptyResponse
 
-import cnr_params
-from cnr_runtime import init_node, quiet_at_shutdown
+from cnr_runtime import quiet_at_shutdown
 from cnr_navigation.action_server import TakeoverActionServer
 from cnr_navigation.cfg import DWAPlannerConfig, MoveBaseConfig
 from cnr_navigation.core.dwa import DWAController
-from cnr_navigation.core.geometry import IDENTITY, Pose2D, yaw_to_quaternion
-from cnr_navigation.core.migration import GoalRecord, HandOver, parse_state, target_yaw
+from cnr_navigation.core.geometry import IDENTITY, Pose2D
 from cnr_navigation.core.move_base import MoveBaseCore, Velocity, goal_problem
-from cnr_navigation.core.param_reader import NavigationParams, dwa_config, move_base_config, read_navigation_params
+from cnr_navigation.core.param_reader import NavigationParams, dwa_config, move_base_config
 from cnr_navigation.core.param_tables import GLOBAL_PLANNERS, LOCAL_PLANNERS
 from cnr_navigation.core.planner import GlobalPlanner, PlanningError, path_with_headings
 from cnr_navigation.core.recovery import ClearCostmapRecovery, Recovery, RotateRecovery
 from cnr_navigation.costmap_ros import CostmapROS
-from cnr_navigation.ros_io import RosParamReader, TfHelper, path_msg, pose_stamped, pose_to_2d
-from migration_manager.instance import Hooks, ManagedInstance, Retiring, prepare_process
+from cnr_navigation.ros_io import TfHelper, path_msg, pose_stamped, pose_to_2d
+
+
+class OutputGate(Protocol):
+    """Whether the node may produce output: a managed instance (``migration_manager.instance.ManagedInstance``)
+    or :class:`Unmanaged`."""
+
+    managed: bool
+    lock: threading.RLock           # held while a goal's status is decided (a freeze takes the state under it)
+
+    @property
+    def active(self) -> bool: ...   # outputs allowed now (the lease is held)
+
+    @property
+    def frozen(self) -> bool: ...   # outputs closed for good: the goal belongs to the next instance
+
+    def publisher(self, name: str, data_class, **kwargs) -> rospy.Publisher: ...
+
+
+class Unmanaged:
+    """The gate of a node that runs on its own: always active, never frozen, plain publishers."""
+
+    managed = False
+    active = True
+    frozen = False
+
+    def __init__(self) -> None:
+        self.lock = threading.RLock()
+
+    @staticmethod
+    def publisher(name: str, data_class, **kwargs) -> rospy.Publisher:
+        return rospy.Publisher(name, data_class, **kwargs)
+
+
+class Progress:
+    """What the node tells of a goal's way to its first velocity command (nothing, on its own; the migration
+    adapter times the first command after an activation)."""
+
+    def step(self, name: str) -> None:
+        """A step of the way (the goal executing, started, the outputs opening)."""
+
+    def commanded(self) -> None:
+        """A velocity command went out (called under the node's output lock)."""
 
 
 class _RecoveryBackend:
@@ -69,33 +105,32 @@ class _RecoveryBackend:
         return self.node.local_costmap.in_collision(pose)
 
 
-class MoveBaseNode(Hooks):
-    """The node: builds costmaps, planner, controller and the state machine, and serves the action."""
+class MoveBaseNode:
+    """The node: builds costmaps, planner, controller and the state machine, and serves the action.
 
-    def __init__(self, params: NavigationParams) -> None:
+    Args:
+        params: the node's parameters.
+        standby: start as a standby (the migration adapter's): the action server prepared but not started and
+            the reconfigure services closed until :meth:`open_services`.
+    """
+
+    def __init__(self, params: NavigationParams, standby: bool = False) -> None:
         self.params = params
         self.global_frame = params.global_frame
-        # migration (README "Migration state"); the managed instance is created last, once the node is complete
-        self.instance: Optional[ManagedInstance] = None
-        # ManagedInstance's rule, known early; a managed instance's subscriptions carry its host in their caller id
-        self.managed = prepare_process()
+        self.standby = standby
+        self.gate: Optional[OutputGate] = None   # set by start(), once the node is complete
+        self.progress = Progress()
         self.output_lock = threading.RLock()     # outputs_open vs. each publication
         self.outputs_open = False                # action server, services and topics open (active, not frozen)
         self.open_lock = threading.Lock()        # opening vs. closing the outputs
-        self.handover: Optional[HandOver] = None             # set_state's goals, taken over when outputs open
         self.takeover_recovery: Dict[str, Tuple[int, str, tuple]] = {}   # goal id -> recovery state, plan
         # (goal id, target in the global frame, next recovery index, trigger) of the goal the state machine
         # pursues; replaced whole, so get_state reads it without the state machine's lock
         self.pursuit: Optional[Tuple[str, Pose2D, int, str]] = None
         self.services: List[rospy.Service] = []
-        self.retiring = Retiring()               # a frozen instance's services, unregistered after the freeze
         self.reconfigure_servers: List[ReconfigureServer] = []
         self.ready = threading.Event()           # the node is complete (the instance may be promoted before)
         self.dormant = False                     # retired and asleep: no sensor subscriptions, costmaps paused
-        self.activated_at: Optional[float] = None   # monotonic time of the last activation, until its first command
-        self.steps: Dict[str, float] = {}           # monotonic times of the steps after the last activation (_out)
-        self.commanding = threading.Event()      # the first velocity command since the last activation went out
-        self.openings = 0                        # outputs opened so far (the services belong to the last)
         self.announcement: Optional[Callable[[], None]] = None   # a taken-over goal's: after its first cycle
         self.server = TakeoverActionServer('move_base', MoveBaseAction, self._execute)
         self.tf_buffer = tf2_ros.Buffer()
@@ -139,9 +174,11 @@ class MoveBaseNode(Hooks):
         self.mb_server = ReconfigureServer(MoveBaseConfig, self._on_move_base_cfg)
         self._reconfigure(self.mb_server)
 
-        # the managed instance last: a standby is announced (and may be promoted) once it is complete
-        self.instance = ManagedInstance('move_base', self)
-        pub = self.instance.publisher
+    def start(self, gate: Optional[OutputGate] = None) -> None:
+        """Open the output publishers through ``gate`` (None: :class:`Unmanaged`); a node on its own (not a
+        standby) opens its action server and services at once."""
+        self.gate = gate if gate is not None else Unmanaged()
+        pub = self.gate.publisher
         self.cmd_pub = pub('cmd_vel', Twist, queue_size=1)
         self.current_goal_pub = pub('~current_goal', PoseStamped, queue_size=1)
         self.action_goal_pub = pub('move_base/goal', MoveBaseActionGoal, queue_size=1)
@@ -151,11 +188,11 @@ class MoveBaseNode(Hooks):
         self.local_plan_pub = pub('~DWAPlannerROS/local_plan', Path, queue_size=1)
         for cm in (self.global_costmap, self.local_costmap):
             cm.open_publishers(pub)
-        if self.instance.managed:
+        if self.standby:
             self.server.prepare()          # a standby's action server waits, connected, for its promotion
         self.ready.set()
-        if not self.instance.managed:
-            self._open_outputs()
+        if not self.standby:
+            self.open_outputs()
 
     # ================================================================================================
     # NavigationBackend for the state machine
@@ -213,43 +250,26 @@ class MoveBaseNode(Hooks):
     def sensors_current(self) -> bool:
         return self.local_costmap.sensors_current()
 
-    def standby_ready(self) -> bool:
-        """Promotable without a stall: the node is complete and its local costmap follows the sensors (each
-        source with an expected rate sent a scan within it). A clone promoted before its first scans waits for
-        them in its first control cycle: cold cloud -> robot hand-overs took 2.6-6.6 s (median) with the clone
-        just started on the capped robot (bench_migration.sh, session 11). And its action server hears every
-        client: a goal sent right after the promotion must not be lost to a subscription still connecting."""
-        return (self.ready.is_set() and not self.dormant and self.local_costmap.sensors_current(warn=False)
-                and self.server.clients_connected())
-
     # ================================================================================================
-    # outputs and migration (README "Migration state")
+    # outputs
 
     def _may_output(self) -> bool:
-        """Publish now? Only while the outputs are open and the lease is held (always, unmanaged)."""
-        return self.outputs_open and self.instance is not None and self.instance.active
+        """Publish now? Only while the outputs are open and the gate is active (the lease held, if managed)."""
+        return self.outputs_open and self.gate is not None and self.gate.active
 
     def _out(self, publisher: rospy.Publisher, msg) -> None:
         with self.output_lock:              # on_frozen closes under this lock: nothing goes out after it
             if self._may_output():
                 publisher.publish(msg)
-                if publisher is self.cmd_pub and self.activated_at is not None:
-                    self.commanding.set()
-                    since = time.monotonic() - self.activated_at
-                    steps = ', '.join(f'{name} {1000 * (t - self.activated_at):.0f}' for name, t in self.steps.items()
-                                      if t >= self.activated_at)
-                    self.activated_at = None
-                    cycle = self.control_times[-1] if self.control_times else math.nan
-                    rospy.loginfo(f'move_base: first velocity command {1000 * since:.0f} ms after becoming active'
-                                  f'{f" (then, in ms: {steps})" if steps else ""}; '
-                                  f'its control cycle took {1000 * cycle:.0f} ms')
+                if publisher is self.cmd_pub:
+                    self.progress.commanded()
 
     def _conclude(self, terminal, **kwargs) -> bool:
         """Give the current goal a terminal status (``terminal`` is a SimpleActionServer setter), unless this
         instance is frozen: its state, with the goal in it, was taken under the instance lock and the goal is
         the next instance's to conclude. A lapsed lease does not hold the status back."""
-        with self.instance.lock:
-            if self.instance.frozen or not self.server.started:
+        with self.gate.lock:
+            if self.gate.frozen or not self.server.started:
                 return False
             terminal(**kwargs)
             return True
@@ -258,185 +278,54 @@ class MoveBaseNode(Hooks):
         """Keep the dynamic_reconfigure servers; a standby closes their services until it is active."""
         for server in servers:
             self.reconfigure_servers.append(server)
-            if self.managed:
+            if self.standby:
                 server.set_service.shutdown('standby')
                 server.set_service = None
 
-    def get_state(self) -> Dict[str, Any]:
-        return self._hand_over().to_dict()
-
-    def _hand_over(self) -> HandOver:
-        a = self.server.action_server
-        with a.lock, self.server.lock:
-            if self.handover is not None:                  # promoted, not opened yet: what it was given
-                return self.handover
-            current, pending = self.server.goal_snapshot()
-            pursuit = self.pursuit
-            goal = next_goal = None
-            if current is not None:
-                gid = current.get_goal_id()
-                if pursuit is not None and pursuit[0] == gid.id:
-                    _, target, index, trigger = pursuit
-                    plan = self.core.controlled_plan()
-                    goal = GoalRecord(gid.id, gid.stamp.secs, gid.stamp.nsecs, self.global_frame, target.x,
-                                      target.y, target.yaw, self._cancel_requested(current), index, trigger,
-                                      () if plan is None else tuple(map(tuple, plan.tolist())))
-                else:                                      # accepted, not started (or just finished) here
-                    goal = self._record(current, *self.takeover_recovery.get(gid.id, (0, 'PLANNING_R', ())))
-            if pending is not None:
-                next_goal = self._record(pending, 0, 'PLANNING_R')
-            seen_goals, seen_cancels = self.server.seen()
-            return HandOver(goal, next_goal, tuple(seen_goals), tuple(seen_cancels))
-
-    def _record(self, handle, recovery_index: int, recovery_trigger: str, plan=()) -> GoalRecord:
-        """A goal as the client sent it (its own frame)."""
-        gid, target = handle.get_goal_id(), handle.get_goal().target_pose
-        p, q = target.pose.position, target.pose.orientation
-        return GoalRecord(gid.id, gid.stamp.secs, gid.stamp.nsecs, target.header.frame_id.lstrip('/') or
-                          self.global_frame, p.x, p.y, target_yaw((q.x, q.y, q.z, q.w)),
-                          self._cancel_requested(handle), recovery_index, recovery_trigger, tuple(plan))
-
-    def _note_pursuit(self, goal_id: Optional[str]) -> None:
-        """Record the goal the state machine pursues (None: none) with its recovery state."""
-        goal = self.core.goal
-        if goal_id is None or goal is None:
-            self.pursuit = None
-            return
-        self.pursuit = (goal_id, goal, *self.core.recovery_state())
-
-    @staticmethod
-    def _cancel_requested(handle) -> bool:
-        return handle.get_goal_status().status in (GoalStatus.PREEMPTING, GoalStatus.RECALLING)
-
-    def set_state(self, state: Dict[str, Any]) -> None:
-        handover = parse_state(state, len(self.core.recoveries))
-        a = self.server.action_server
-        with a.lock, self.server.lock:
-            if self.outputs_open:
-                raise ValueError('move_base state: this instance is active; a state is taken over only on '
-                                 'promotion')
-            self.handover = handover
-        if not handover.empty:
-            rospy.loginfo(f'move_base: handed over: goal {handover.goal.id if handover.goal else None}, '
-                          f'next goal {handover.next_goal.id if handover.next_goal else None}')
-
-    @staticmethod
-    def _action_goal(record: GoalRecord) -> MoveBaseActionGoal:
-        msg = MoveBaseActionGoal()
-        msg.goal_id.id = record.id
-        msg.goal_id.stamp = rospy.Time(record.stamp_secs, record.stamp_nsecs)
-        msg.header.stamp = msg.goal_id.stamp
-        target = msg.goal.target_pose
-        target.header.frame_id = record.frame
-        target.header.stamp = msg.goal_id.stamp
-        target.pose.position.x, target.pose.position.y = record.x, record.y
-        target.pose.orientation.x, target.pose.orientation.y, target.pose.orientation.z, \
-            target.pose.orientation.w = yaw_to_quaternion(record.yaw)
-        return msg
-
-    def on_active(self) -> None:
-        self.commanding.clear()
-        self.activated_at = time.monotonic()       # the first velocity command after it is logged (_out)
-        self.steps = {}
-        if not self.outputs_open:
-            threading.Thread(target=self._open_outputs, name='open_outputs', daemon=True).start()
-
-    def _step(self, name: str) -> None:
-        """Note when a step of the first command's path came (logged with the first command)."""
-        if self.activated_at is not None:
-            self.steps[name] = time.monotonic()
-
-    def _open_outputs(self) -> None:
-        """Action server (taking over the handed-over goals first), then services and reconfigure services: a
-        goal handed over is controlled first (the registrations with the master wait for its first velocity
-        command, at most two control periods: on the capped robot they competed with the first control cycle,
-        whose command came 31-497 ms after the activation, median 171 ms, bench_migration.sh session 19)."""
-        self._step('opening')
-        self.ready.wait()
+    def open_outputs(self) -> None:
+        """A node on its own: the action server and the services open at once."""
         with self.open_lock:
-            if self.outputs_open or self.instance.frozen or rospy.core.is_shutdown_requested():
-                return
-            self.retiring.close()              # promoted again before after_frozen ran: the same names
             with self.output_lock:
                 self.outputs_open = True
-            self.openings += 1
-            opening = self.openings
-            a = self.server.action_server
-            with a.lock, self.server.lock:
-                handover, self.handover = self.handover or HandOver(), None
-                goals: List[Tuple[MoveBaseActionGoal, str, bool]] = []
-                if handover.goal is not None:
-                    g = handover.goal
-                    self.takeover_recovery[g.id] = (g.recovery_index, g.recovery_trigger, g.plan)
-                    goals.append((self._action_goal(g), 'active', g.cancel_requested))
-                if handover.next_goal is not None:
-                    goals.append((self._action_goal(handover.next_goal), 'pending',
-                                  handover.next_goal.cancel_requested))
-                replayed = self.server.start_with(goals, handover.seen_goals, handover.seen_cancels)
-                self._step('server started')
-            if replayed:
-                rospy.loginfo(f'move_base: sent while no instance was active, taken up: {", ".join(replayed)}')
-        if goals:
-            self.commanding.wait(2.0 / self.core.cfg.controller_frequency)
-        with self.open_lock:
-            if not self.outputs_open or self.openings != opening:    # frozen meanwhile (and opened again)
-                return
-            self.services = [rospy.Service('~make_plan', GetPlan, self._make_plan_service),
-                             rospy.Service('~NavfnROS/make_plan', GetPlan, self._navfn_make_plan),
-                             rospy.Service('~clear_costmaps', Empty, self._clear_costmaps_service)]
-            for server in self.reconfigure_servers:
-                if server.set_service is None:
-                    server.set_service = rospy.Service(server.ns + 'set_parameters', ReconfigureSrv,
-                                                       server._set_callback)
-        if self.instance.managed:
-            rospy.loginfo(f'move_base: active{f" with goal {handover.goal.id}" if handover.goal else ""}')
+            self.server.start_with()
+            self.open_services()
 
-    def on_frozen(self) -> None:
-        """Outputs closed for good: no velocity command from now on (not even a zero one: the next instance
-        commands), no status for the goal (it continues in the next instance), no services."""
-        with self.output_lock:
-            self.outputs_open = False
-        with self.open_lock:
-            self.server.release()
-            self.pursuit = None
-            self.handover = None
-            self.retiring.add(*self.services)              # unregistered once the freeze was answered
-            self.services = []
-            for server in self.reconfigure_servers:
-                self.retiring.add(server.set_service)
-                server.set_service = None
+    def open_services(self) -> None:
+        """Register ``~make_plan``, ``~NavfnROS/make_plan``, ``~clear_costmaps`` and the reconfigure services
+        a standby closed (under ``open_lock``)."""
+        self.services = [rospy.Service('~make_plan', GetPlan, self._make_plan_service),
+                         rospy.Service('~NavfnROS/make_plan', GetPlan, self._navfn_make_plan),
+                         rospy.Service('~clear_costmaps', Empty, self._clear_costmaps_service)]
+        for server in self.reconfigure_servers:
+            if server.set_service is None:
+                server.set_service = rospy.Service(server.ns + 'set_parameters', ReconfigureSrv,
+                                                   server._set_callback)
 
-    def after_frozen(self) -> None:
-        """The goal dropped (the control loop ends at its next look: the instance is frozen; dropping it here does
-        not make the freeze wait for a control cycle), the services unregistered."""
-        with self.open_lock:
-            if self.instance.frozen:           # not promoted again meanwhile (a rolled-back migration)
-                self.core.reset()
-            self.retiring.close()
+    def take_services(self) -> list:
+        """The services :meth:`open_services` registered, taken from the node (to be unregistered; under
+        ``open_lock``)."""
+        taken: list = list(self.services)
+        self.services = []
+        for server in self.reconfigure_servers:
+            taken.append(server.set_service)
+            server.set_service = None
+        return taken
 
-    def on_sleep(self) -> None:
-        """Dormant (a frozen instance the manager keeps for the next migration here): the sensor, odometry and
-        tf subscriptions closed, the costmaps paused with their obstacles forgotten. The process, its
-        parameters, registrations and prepared action server stay, so waking takes a subscription, not a
-        start-up (a clone starting under the robot's CPU cap took 17-27 s)."""
-        with self.open_lock:
-            self.dormant = True
-            self.odom_sub.unregister()
-            self.tf_listener.unregister()
-            for cm in (self.global_costmap, self.local_costmap):
-                cm.sleep()
-            self.velocity = (0.0, 0.0)
+    def pause_inputs(self) -> None:
+        """Odometry and tf unsubscribed, the costmaps asleep (their sensors unsubscribed, obstacles forgotten)."""
+        self.odom_sub.unregister()
+        self.tf_listener.unregister()
+        for cm in (self.global_costmap, self.local_costmap):
+            cm.sleep()
+        self.velocity = (0.0, 0.0)
 
-    def on_wake(self) -> None:
-        """A standby again: sensors, odometry and tf subscribed anew (tf from an empty buffer: the old one is
-        stale), costmaps updating; ready once the local costmap is current (``standby_ready``)."""
-        with self.open_lock:
-            self.tf_buffer.clear()
-            self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
-            self.odom_sub = rospy.Subscriber(self.params.odom_topic, Odometry, self._on_odom, queue_size=1)
-            for cm in (self.global_costmap, self.local_costmap):
-                cm.wake()
-            self.dormant = False
+    def resume_inputs(self) -> None:
+        """Odometry and tf subscribed anew (tf from an empty buffer: the old one is stale), costmaps updating."""
+        self.tf_buffer.clear()
+        self.tf_listener = tf2_ros.TransformListener(self.tf_buffer)
+        self.odom_sub = rospy.Subscriber(self.params.odom_topic, Odometry, self._on_odom, queue_size=1)
+        for cm in (self.global_costmap, self.local_costmap):
+            cm.wake()
 
     # ================================================================================================
     # callbacks
@@ -506,7 +395,7 @@ class MoveBaseNode(Hooks):
             if takeover[2]:                    # it was being controlled: along its plan, without planning first
                 self.core.restore_plan(np.array(takeover[2]), rospy.get_time())
         self._note_pursuit(goal_id if outcome is None else None)
-        self._step('goal started')
+        self.progress.step('goal started')
         if outcome is not None:
             self._conclude(self.server.set_aborted, text=outcome.text)
             return False
@@ -527,7 +416,7 @@ class MoveBaseNode(Hooks):
 
     def _handed_over(self) -> bool:
         """Frozen (or superseded): the goal belongs to the next instance."""
-        return self.instance is not None and (self.instance.frozen or not self.outputs_open)
+        return self.gate is not None and (self.gate.frozen or not self.outputs_open)
 
     def _leave_goal(self) -> None:
         """End the execute callback of a frozen instance without a terminal status: wait until on_frozen has
@@ -544,7 +433,7 @@ class MoveBaseNode(Hooks):
     @quiet_at_shutdown
     def _execute(self, goal: MoveBaseGoal) -> None:
         """The action's execute callback: ``MoveBase::executeCb``."""
-        self._step('executing')
+        self.progress.step('executing')
         try:
             self._run_goal(goal)
         finally:
@@ -566,8 +455,8 @@ class MoveBaseNode(Hooks):
                 rate = rospy.Rate(frequency)
             if self.server.is_preempt_requested():
                 if self.server.is_new_goal_available():
-                    with self.instance.lock:           # accepting publishes: not once the state was taken
-                        new_goal = None if self.instance.frozen else self.server.accept_new_goal()
+                    with self.gate.lock:               # accepting publishes: not once the state was taken
+                        new_goal = None if self.gate.frozen else self.server.accept_new_goal()
                     if new_goal is None:
                         continue
                     if not self._start_goal(new_goal.target_pose):
@@ -579,7 +468,7 @@ class MoveBaseNode(Hooks):
                     if self._conclude(self.server.set_preempted):
                         return
                     continue
-            if not self.instance.active:               # the lease lapsed: no output until it is renewed
+            if not self.gate.active:                   # the lease lapsed: no output until it is renewed
                 if not paused:
                     paused = True
                     rospy.logwarn('move_base: lease lapsed, control paused (no velocity commands)')
@@ -620,7 +509,7 @@ class MoveBaseNode(Hooks):
                 break
         if self.server.is_active():
             self.core.reset()
-            if self.instance.managed:                  # the goal may continue in another instance
+            if self.gate.managed:                      # the goal may continue in another instance
                 self.server.release()
             else:
                 self.server.set_aborted(text='Aborting on the goal because the node has been killed')
@@ -650,7 +539,7 @@ class MoveBaseNode(Hooks):
         while not rospy.is_shutdown():
             try:
                 now = rospy.get_time()
-                if self.core.planner_due(now) and self.instance is not None and self.instance.active:
+                if self.core.planner_due(now) and self.gate is not None and self.gate.active:
                     self.core.run_planner(now, clock=rospy.get_time)
                 else:
                     time.sleep(0.2 if self.dormant else 0.02)
@@ -755,22 +644,3 @@ class MoveBaseNode(Hooks):
             self.dwa.cfg = dwa_config(config, self.dwa_extra)
         return config
 
-
-@cnr_params.exit_on_config_error
-def main() -> None:
-    init_node('move_base')
-    try:
-        reader = RosParamReader()
-        params = read_navigation_params(reader, rospy.get_name())
-        for warning in params.warnings:
-            rospy.logwarn(warning)
-        node = MoveBaseNode(params)
-    except Exception:                 # stopped (Ctrl-C) while starting: rospy calls fail, that is no error
-        if rospy.is_shutdown():
-            return
-        raise
-    calls = dict(reader.calls)
-    rospy.loginfo(f'move_base ready: {sum(calls.values())} parameter calls before the reconfigure servers '
-                  f'({", ".join(f"{k} {v}" for k, v in sorted(calls.items()))}); controller '
-                  f'{node.core.cfg.controller_frequency:g} Hz, planner {node.core.cfg.planner_frequency:g} Hz')
-    rospy.spin()
