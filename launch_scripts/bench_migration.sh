@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# bench_migration.sh — migration downtime on the testbed (issue 11): the two-host mission with --migration
+# bench_migration.sh — migration downtime on the testbed: the two-host mission with --migration
 # (every managed module starts on the robot), a probe on the robot recording each module's output and the
 # instance it came from, and for each link RTT (default 0, 50, 100 ms) x module (move_base,
 # local_mapcell_manager, global_goal_manager, mfg) x mode (cold, hot): --runs round trips robot -> cloud ->

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# exp_campaign.sh — the continuous experiment of thesis §5 (issue 12): --conditions link conditions (default
+# exp_campaign.sh — the continuous experiment of thesis §5: --conditions link conditions (default
 # 100; RTT 0-200 ms, rate 0.5-50 Mbit/s log-uniform, loss 0-5 %, drawn with --seed) on the two-host testbed, each
 # profiled once with move_base on the robot and decided by network_monitor's migration_decider (k-NN), then run
 # onload and offload on that profile; both runs evaluated (Eq. 4-5) and learned from an empty training set.

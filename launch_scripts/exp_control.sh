@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# exp_control.sh — the control experiment of thesis Table 4-5 (issue 12): --runs runs (default 20) of the task
+# exp_control.sh — the control experiment of thesis Table 4-5: --runs runs (default 20) of the task
 # (default corridor_round_trip@corridor: config/scenarios/corridor.yaml tasks) on the two-host testbed with every
 # module on the robot and no decision; CT (task time) and CB (battery fraction) as mean and sd of the completed
 # runs are written to config/control_values.yaml (Eq. 4-5's control values) and printed beside the thesis's

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# exp_local_remote.sh — thesis Figs. 5-5 and 5-6 (issue 12): the task (default corridor_round_trip@corridor)
+# exp_local_remote.sh — thesis Figs. 5-5 and 5-6: the task (default corridor_round_trip@corridor)
 # --runs times with every module on the robot and --runs times with move_base on the cloud (alternating), on the
 # unrestricted link, at each robot CPU slowdown of --slowdowns (default config/testbed.yaml's robot_cpu.slowdown
 # and twice it: the thesis compared local CPU frequencies). Battery and time per task, mean and sd, beside the

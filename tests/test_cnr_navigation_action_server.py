@@ -1,6 +1,6 @@
 """cnr_navigation.action_server: a goal left active by an execute callback the node's shutdown ended.
 
-CI (session 24) saw move_base at the end of a mission: the shutdown closed the action's topics while a goal was
+At the end of a mission in CI, move_base could see this: the shutdown closed the action's topics while a goal was
 being pursued, the execute callback ended quietly (``quiet_at_shutdown``), and the execute thread then tried to
 abort the goal: a warning, "publish() to a closed topic" with its traceback, and an invalid transition. At the
 shutdown nothing can be published any more, so the thread must just end.

@@ -299,7 +299,7 @@ def test_a_lapsed_lease_holds_the_output_back_and_the_service_refuses(lmm, ros):
 def test_a_standby_names_a_replica_in_its_status_only_once_it_prepared_it(ros, workspace, tmp_path):
     """A migration here waits (timeouts.replica) until the standby's status names a replica of the source; for
     the store that must mean the replica was prepared (filed and drafted ahead), or the promotion waits for a
-    prepare still running (0.4 s on the capped robot, bench_migration.sh session 22). A replica whose draft
+    prepare still running (0.4 s on the capped robot in bench_migration.sh). A replica whose draft
     cannot be written (the store's directory gone) is not named; the next one, prepared, is."""
     import shutil
     from cnr_msgs.msg import ModuleState

@@ -136,7 +136,7 @@ class TakeoverActionServer(actionlib.SimpleActionServer):
 
         And without actionlib's abort at the shutdown: a callback the node's shutdown ended leaves its goal
         active, and aborting it then publishes onto topics the shutdown closes ("publish() to a closed topic"
-        with its traceback at a mission's end, CI of session 24); the thread just ends."""
+        with its traceback at a mission's end); the thread just ends."""
         while not rospy.is_shutdown():
             with self.terminate_mutex:
                 if self.need_to_terminate:

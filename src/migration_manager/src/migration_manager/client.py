@@ -6,8 +6,8 @@ across a migration, but its provider changes: the frozen instance answers "not t
 has registered it (on the robot, to a cloud instance: once the bridge has mirrored it). A client that simply
 looks the name up again after a refusal finds the old provider for a while and asks it again: over a 100 ms
 link a new connection to it costs three round trips (TCP, header, request) before it fails
-(``bench_migration.sh`` session 23: every global_goal_manager hand-over to the robot at 100 ms that took over
-0.25 s spent 0.2–0.3 s that way).
+(``bench_migration.sh``: a global_goal_manager hand-over to the robot at 100 ms that way spends 0.2–0.3 s
+of its 0.25 s).
 
 :class:`MovableServiceProxy` keeps one persistent connection; after a refusal or a failure it does not ask that
 provider again until the name has moved: it polls its own master (local, cheap) every :data:`LOOKUP_POLL` s
@@ -119,8 +119,7 @@ class MovableServiceProxy:
         every :data:`HEDGE_POLL` s, and once it has moved to another provider that one is asked too; the first
         answer that is not a refusal wins (at most one instance is active: both cannot serve). The request a
         provider that is being stopped took in was left unanswered until its process had gone: 0.13-0.7 s on
-        the capped robot (``bench_migration.sh`` session 24, every global_goal_manager hand-over to the cloud
-        that took over 0.25 s).
+        the capped robot (``bench_migration.sh``, global_goal_manager hand-overs to the cloud).
 
         Returns:
             ``(done, result, sent, proxy)`` of the winning request, else of the latest one that ended (a

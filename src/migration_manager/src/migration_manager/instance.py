@@ -481,7 +481,7 @@ class ManagedInstance:
         promotion takes ``self.lock``; a replica is handed over only under it, while still a standby. The status
         names the newest replica prepared, and is sent at once for the first of an instance: a migration here
         waits for it, so that the promotion does not wait for a prepare_state still running (the store's first,
-        of thousands of measurements, took 0.4 s on the capped robot: bench_migration.sh, session 22)."""
+        of thousands of measurements, takes 0.4 s on the capped robot in bench_migration.sh)."""
         while not rospy.core.is_shutdown_requested():
             with self.prepare_wake:
                 self.prepare_wake.wait_for(lambda: self.to_prepare is not None, timeout=1.0)

@@ -4,7 +4,7 @@ The agent used to start every instance as ``cnr_launch <package> <file> <module>
 instance that imports roslaunch, parses the launch file, sets the parameters and starts the one node. On the
 robot, whose modules share a third of a core, that parent costs more CPU than the node's own start-up
 (``import roslaunch`` alone: 0.63 CPU-s here, ``import rospy`` 0.40) and then polls its child for as long as it
-runs (all parents together: 0.027 CPU of the robot's 0.33 in the hot bench, session 11). Now the agent loads the
+runs (all parents together: 0.027 CPU of the robot's 0.33 in the hot bench). So the agent loads the
 launch once with roslaunch's own loader (same substitutions, includes, ``rosparam`` files, ``env`` and remaps as
 ``roslaunch``) and starts each instance itself: the parameters in one XML-RPC multicall to the master, then the
 node's process, exactly as roslaunch would have run it. The launch is resolved again for every instance (as a

@@ -24,8 +24,7 @@ published; :func:`parse_state` checks it completely before anything is changed.
 A standby does the bulk of a promotion ahead (:class:`Prepared`): from each replica of the active instance it
 checks, files into cells and writes into a draft of its store only the measurements the replica adds, so a
 promotion checks and writes only what its state adds to the newest replica (restored whole, a store of 6000+
-measurements made the hand-over to the capped robot take 0.38-0.78 s at 100 ms RTT: bench_migration.sh,
-session 19).
+measurements made the hand-over to the capped robot take 0.38-0.78 s at 100 ms RTT in bench_migration.sh).
 """
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""A simple configured placement rule (issue 11's mission; the learned k-NN decision replaces it in issue 12).
+"""A simple configured placement rule (``run_mission.sh --rule``; network_monitor's learned k-NN decision is the other way).
 
 From the link quality the robot's bridge measures (alive, RTT, heartbeat loss) it says where the rule's modules
 should run: on the cloud while the link is *good* (RTT and loss below the good thresholds), on the robot while
