@@ -28,6 +28,7 @@ import rospy
 from cnr_harness import wait_until
 from cnr_msgs.msg import InstanceStatus, MigrationLease, MigrationRenew
 from cnr_msgs.srv import InstanceControl
+from migration_manager.codes import ROLE
 from migration_manager.core import state as codec
 from migration_manager.core.lease import Grantor, instance_id
 
@@ -80,7 +81,7 @@ class LeaseDriver:
 
         def reached():
             s = self.statuses[host]
-            return s if s is not None and s.role == role else None
+            return s if s is not None and s.role == ROLE[role] else None
         return wait_until(reached, timeout, f'{instance_id(self.module, host)} {role}')
 
     def wait_standby(self, timeout: float, host: str = '') -> InstanceStatus:

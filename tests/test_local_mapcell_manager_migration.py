@@ -302,7 +302,7 @@ def test_a_standby_names_a_replica_in_its_status_only_once_it_prepared_it(ros, w
     prepare still running (0.4 s on the capped robot in bench_migration.sh). A replica whose draft
     cannot be written (the store's directory gone) is not named; the next one, prepared, is."""
     import shutil
-    from cnr_msgs.msg import ModuleState
+    from cnr_msgs.msg import InstanceStatus, ModuleState
     from migration_driver import LeaseDriver
     from migration_manager.core import state as codec
     store_dir = tmp_path / 'store'
@@ -328,7 +328,7 @@ def test_a_standby_names_a_replica_in_its_status_only_once_it_prepared_it(ros, w
         pub.publish(ModuleState(module=MODULE, instance=cloud, term=1, seq=6, base_seq=0, data=whole))
         st = wait_until(lambda: driver.status if driver.status.replica_seq else None, 10,
                         'a status naming the prepared replica')
-        assert (st.role, st.replica_of, st.replica_seq) == ('standby', cloud, 6)
+        assert (st.role, st.replica_of, st.replica_seq) == (InstanceStatus.STANDBY, cloud, 6)
         assert proc.alive() and 'Traceback' not in proc.output()
     finally:
         pub.unregister()

@@ -80,7 +80,7 @@ def test_a_standby_reports_the_replica_it_holds_and_answers_a_ping_without_its_s
     of it: the standby's status names whose replicas it holds and the newest; a standby that gets patches to a
     replica it does not hold asks the active instance for a whole one. ``ping``, the manager's readiness probe,
     answers ready without the state (``state`` encodes it: the whole store, for local_mapcell_manager)."""
-    from cnr_msgs.msg import ModuleState
+    from cnr_msgs.msg import InstanceStatus, ModuleState
     from cnr_msgs.srv import InstanceControl, InstanceControlResponse
     from migration_manager.core import state as codec
     proc, driver = gg
@@ -105,7 +105,7 @@ def test_a_standby_reports_the_replica_it_holds_and_answers_a_ping_without_its_s
                                 base_seq=0, data=data))
         st = wait_until(lambda: driver.status if driver.status.replica_seq else None, 5,
                         'a status naming the replica held')
-        assert (st.role, st.replica_of, st.replica_seq) == ('standby', 'global_goal_manager@cloud', 7)
+        assert (st.role, st.replica_of, st.replica_seq) == (InstanceStatus.STANDBY, 'global_goal_manager@cloud', 7)
     finally:
         pub.unregister()
         cloud.shutdown()

@@ -101,12 +101,15 @@ class Bed:
         return self.rosrun('robot', *argv, timeout=120)
 
     def status(self, side):
-        """The instance's latched status on its host's master; None when no instance publishes one."""
+        """The instance's latched status on its host's master (its role in words); None when no instance
+        publishes one."""
+        from migration_manager.codes import ROLE_WORD
         try:
             out = self.rosrun(side, 'rostopic', 'echo', '-n', '1', f'/migration/{MODULE}/{side}/status', timeout=8)
         except subprocess.TimeoutExpired:
             return None
-        return yaml.safe_load(out.stdout.split('---')[0]) if out.returncode == 0 else None
+        status = yaml.safe_load(out.stdout.split('---')[0]) if out.returncode == 0 else None
+        return dict(status, role=ROLE_WORD.get(status.get('role'))) if status else None
 
     def rows(self):
         with open(self.probe_file) as f:
@@ -248,13 +251,14 @@ def test_the_robot_s_active_instance_killed_is_replaced_by_its_restart(bed):
     promotes that standby once the dead one's lease ran out (before, nothing promoted it: the module had no
     active instance until the next migration order)."""
     import signal
+    from cnr_msgs.msg import AgentHealth
     if bed.placement()[MODULE][0] != 'robot':
         assert bed.migrate('robot', 'cold').returncode == 0
     term = bed.placement()[MODULE][1]
     out = bed.rosrun('robot', 'rostopic', 'echo', '-n', '1', '/migration/agents/robot/health', timeout=15)
     health = yaml.safe_load(out.stdout.split('---')[0])
     pid = health['pids'][health['modules'].index(MODULE)]
-    assert pid > 0 and health['states'][health['modules'].index(MODULE)] == 'running', health
+    assert pid > 0 and health['states'][health['modules'].index(MODULE)] == AgentHealth.RUNNING, health
     t_kill = time.time()
     os.kill(pid, signal.SIGKILL)
     wait_until(lambda: bed.placement()[MODULE][1] > term and bed.placement()[MODULE][0] == 'robot', 90,

@@ -523,7 +523,7 @@ def test_a_retired_instance_sleeps_without_its_inputs_and_wakes_to_take_a_goal_o
     wait_until(rec.stopped, 20, 'the robot to stop')
     # ... but it keeps following the active instance's replicas: woken, it holds one at once (a re-subscription on
     # waking missed the whole state it asked for, and every migration to it waited out timeouts.replica)
-    from cnr_msgs.msg import ModuleState
+    from cnr_msgs.msg import InstanceStatus, ModuleState
     from migration_manager.core import state as codec
     assert '/migration/move_base/state' in node_subscriptions('/move_base')
     replicas = rospy.Publisher('/migration/move_base/state', ModuleState, queue_size=2)
@@ -534,12 +534,13 @@ def test_a_retired_instance_sleeps_without_its_inputs_and_wakes_to_take_a_goal_o
         wait_until(lambda: driver.status.replica_of == 'move_base@cloud', 10, 'the dormant status naming it', d)
     finally:
         replicas.unregister()
-    assert driver.status.role == 'dormant' and driver.status.replica_seq == 3
+    assert driver.status.role == InstanceStatus.DORMANT and driver.status.replica_seq == 3
 
     # woken: a standby again (the same process), ready once its local costmap is current
     res = driver.controls['robot'](command='wake')
     assert res.ok, res.message
-    st = wait_until(lambda: driver.status if driver.status.role == 'standby' and driver.status.ready else None,
+    st = wait_until(lambda: driver.status if driver.status.role == InstanceStatus.STANDBY and driver.status.ready
+                    else None,
                     30, 'the woken standby ready', d)
     assert st.pid == pid and (st.replica_of, st.replica_seq) == ('move_base@cloud', 3)
     assert inputs <= node_subscriptions('/move_base')

@@ -53,20 +53,22 @@ def latest_profile(host, timeout=30.0):
 
 @pytest.mark.parametrize('host,peer', [('robot', 'cloud'), ('cloud', 'robot')])
 def test_both_monitors_publish_alive_profiles_with_a_finite_rtt(monitors, host, peer):
+    from cnr_msgs.msg import NetworkProfile
     p = latest_profile(host)
     assert p.peer == peer and p.alive and 0 < p.rtt < 1.0 and math.isfinite(p.rtt_spread)
     assert 0.0 <= p.loss <= 1.0 and p.interface == 'lo'
-    assert p.a_bw_method == 'none' and math.isnan(p.a_bw) and p.probe_bytes == 0
+    assert p.a_bw_method == NetworkProfile.NONE and math.isnan(p.a_bw) and p.probe_bytes == 0
 
 
 def test_profile_now_with_a_probe_measures_a_bw(monitors):
+    from cnr_msgs.msg import NetworkProfile
     from cnr_msgs.srv import ProfileNow
     rospy.wait_for_service('/nm_robot/profile_now', timeout=30)
     call = rospy.ServiceProxy('/nm_robot/profile_now', ProfileNow)
     r = wait_until(lambda: (lambda x: x if x.success else None)(call(probe=True)), 30, 'a successful probe')
     p = r.profile
     # paced to the byte cap on loopback: 2 MB in 1 s (16 Mbit/s), in iperf3's 128 KiB writes
-    assert p.a_bw > 0 and p.a_bw_method == 'probe' and 1000000 <= p.probe_bytes <= 2000000 + 131072
+    assert p.a_bw > 0 and p.a_bw_method == NetworkProfile.PROBE and 1000000 <= p.probe_bytes <= 2000000 + 131072
     assert p.a_bw <= 1.25 * 16e6 and p.a_bw_age < 2.0
     assert math.isfinite(p.r_bw) and p.r_bw > 0
     quiet = call(probe=False)

@@ -107,6 +107,7 @@ def run(args: argparse.Namespace) -> int:
     from cnr_benchmarks.report import TsvLog, progress
     from cnr_testbed.api import Testbed
     from cnr_testbed.cli import overrides
+    from network_monitor.codes import A_BW_METHOD_WORD
 
     rospy.init_node('bench_profile')
     tb = Testbed(args.testbed_config, overrides(args.testbed_name))    # the running instance's control socket
@@ -153,7 +154,7 @@ def run(args: argparse.Namespace) -> int:
                     load_mbit=args.load_fraction * rate if passive else math.nan,
                     passive_mbit=passive.a_bw / 1e6 if passive else math.nan,
                     passive_age_s=passive.a_bw_age if passive else math.nan,
-                    passive_method=passive.a_bw_method if passive else '',
+                    passive_method=A_BW_METHOD_WORD[passive.a_bw_method] if passive else '',
                     usage_mbit=passive.c_bw / 1e6 if passive else math.nan)
                 log.row(**vars(sample))
                 setting = f"{rtt:5g} ms {rate:4g} Mbit/s" if rate else f"{rtt:5g} ms unshaped"

@@ -31,6 +31,9 @@ from cnr_msgs.srv import Decide, EvaluateTask, GetMeasurements
 from cnr_params import ConfigError
 from cnr_params.ros import private_section
 from cnr_runtime import init_node
+from migration_manager.codes import EVENT_MODE_WORD, STEP_WORD
+from network_monitor.codes import A_BW_METHOD_WORD
+from network_monitor.decider_codes import EVENT_WORD, FORCE, MISSION_STATUS, PLACEMENT_WORD, REASON_WORD
 from kestrel_driver.core.field import TemperatureField
 
 
@@ -140,22 +143,24 @@ class MissionMonitor:
         return now - (self.start_sim if self.start_sim is not None else now)
 
     def _on_decision(self, msg: TaskDecision) -> None:
-        entry = dict(time=self._sim_since_start(), event=msg.event, decision=msg.decision, reason=msg.reason,
-                     policy=msg.policy, confidence=msg.confidence, votes_offload=msg.votes_offload,
+        entry = dict(time=self._sim_since_start(), event=EVENT_WORD[msg.event],
+                     decision=PLACEMENT_WORD[msg.decision], reason=REASON_WORD[msg.reason],
+                     policy=PLACEMENT_WORD[msg.policy], confidence=msg.confidence, votes_offload=msg.votes_offload,
                      votes_onload=msg.votes_onload, c_l=msg.c_l, r_bw=msg.r_bw, loss=msg.loss,
-                     profile_method=msg.profile_method, placement=msg.placement, placed=msg.placed,
-                     placing_time=msg.placing_time, value=msg.value, label=msg.label, message=msg.message)
+                     profile_method=A_BW_METHOD_WORD[msg.profile_method], placement=msg.placement,
+                     placed=msg.placed, placing_time=msg.placing_time, value=msg.value,
+                     label=PLACEMENT_WORD[msg.label], message=msg.message)
         with self.lock:
             self.decisions.append(entry)
-        if msg.event == 'redecided':
-            self._say(f'network-aware: re-decided during the mission: {msg.decision} ({msg.message})')
+        if msg.event == TaskDecision.REDECIDED:
+            self._say(f'network-aware: re-decided during the mission: {entry["decision"]} ({msg.message})')
 
     def _decide(self) -> None:
         """The decision before the task (in a thread: the monitor goes on reporting meanwhile)."""
         try:
             rospy.wait_for_service(f'{self.decider}/decide', 300.0)
             res = rospy.ServiceProxy(f'{self.decider}/decide', Decide)(
-                task=self.decision_task, location=self.name, force='', probe=True, explore=True, settle=0.0,
+                task=self.decision_task, location=self.name, force=FORCE[''], probe=True, explore=True, settle=0.0,
                 reuse_profile=False)
             self._say(f'network-aware: {self.decision_task}@{self.name}: ' + res.message)
         except (rospy.ROSException, rospy.ServiceException) as exc:
@@ -184,21 +189,22 @@ class MissionMonitor:
             self._say(f'network-aware: {self.evaluation}')
             return
         try:
-            res = rospy.ServiceProxy(f'{self.decider}/evaluate', EvaluateTask)(status, t, b, True)
+            res = rospy.ServiceProxy(f'{self.decider}/evaluate', EvaluateTask)(MISSION_STATUS[status], t, b, True)
             self.evaluation = res.message if res.ok else f'not evaluated: {res.message}'
         except (rospy.ROSException, rospy.ServiceException) as exc:
             self.evaluation = f'not evaluated: {exc}'
         self._say(f'network-aware: {self.evaluation}')
 
     def _on_migration(self, msg: MigrationEvent) -> None:
-        if msg.step not in ('done', 'rolled_back', 'failed'):
+        if msg.step not in (MigrationEvent.DONE, MigrationEvent.ROLLED_BACK, MigrationEvent.FAILED):
             return
         entry = dict(id=msg.id, time=self._sim_since_start(), module=msg.module, source=msg.source or None,
-                     target=msg.target, mode=msg.mode, outcome=msg.step, term=msg.term,
+                     target=msg.target, mode=EVENT_MODE_WORD[msg.mode], outcome=STEP_WORD[msg.step], term=msg.term,
                      downtime=None if math.isnan(msg.downtime) else msg.downtime, message=msg.message)
         with self.lock:
             self.migrations.append(entry)
-        self._say(f'migration {msg.id}: {msg.module} {msg.source or "-"} -> {msg.target} ({msg.mode}): {msg.step}'
+        self._say(f'migration {msg.id}: {msg.module} {msg.source or "-"} -> {msg.target} ({entry["mode"]}): '
+                  f'{entry["outcome"]}'
                   + (f', hand-over {1000 * msg.downtime:.0f} ms' if entry['downtime'] is not None else ''))
 
     def _on_placement(self, msg: Placement) -> None:

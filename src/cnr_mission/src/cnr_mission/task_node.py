@@ -34,6 +34,8 @@ from cnr_navigation.goal_sequencer import wait_for_server
 from cnr_params import ConfigError, Section
 from cnr_params.ros import private_section
 from cnr_runtime import init_node
+from network_monitor.codes import A_BW_METHOD_WORD
+from network_monitor.decider_codes import FORCE, MISSION_STATUS, PLACEMENT_WORD, REASON_WORD
 
 FAILED_STATES = (GoalStatus.ABORTED, GoalStatus.REJECTED, GoalStatus.LOST, GoalStatus.RECALLED,
                  GoalStatus.PREEMPTED)
@@ -75,9 +77,9 @@ class TaskRunner:
         self.battery = msg
 
     def _on_decision(self, msg: TaskDecision) -> None:
-        if msg.event == 'redecided':
+        if msg.event == TaskDecision.REDECIDED:
             self.redecisions.append(msg)
-            self.say(f're-decided during the task: {msg.decision} at RTT {1000 * msg.c_l:.0f} ms, R_bw '
+            self.say(f're-decided during the task: {PLACEMENT_WORD[msg.decision]} at RTT {1000 * msg.c_l:.0f} ms, R_bw '
                      f'{msg.r_bw:.3g} ({msg.message})')
 
     @staticmethod
@@ -166,16 +168,17 @@ class TaskRunner:
         self.redecisions = []
         if r.decide:
             self.decide.wait_for_service(self.decide_timeout)
-            d = self.decide(task=self.plan.task, location=self.plan.location, force=force, probe=True,
+            d = self.decide(task=self.plan.task, location=self.plan.location, force=FORCE[force], probe=True,
                             explore=r.explore, settle=settle, reuse_profile=r.reuse_profile)
             if not d.ok:
                 raise RuntimeError(f'the decider refused: {d.message}')
             self.say(f'decision: {d.message}')
             m = d.decision
-            self.decided[r.condition] = m.decision
-            row.update(decision=m.decision, reason=m.reason, policy=m.policy, confidence=m.confidence,
-                       votes_offload=m.votes_offload, c_l=m.c_l, r_bw=m.r_bw, profile_method=m.profile_method,
-                       placed=m.placed, placing_time=m.placing_time, placement=m.placement)
+            self.decided[r.condition] = PLACEMENT_WORD[m.decision]
+            row.update(decision=PLACEMENT_WORD[m.decision], reason=REASON_WORD[m.reason],
+                       policy=PLACEMENT_WORD[m.policy], confidence=m.confidence, votes_offload=m.votes_offload,
+                       c_l=m.c_l, r_bw=m.r_bw, profile_method=A_BW_METHOD_WORD[m.profile_method], placed=m.placed,
+                       placing_time=m.placing_time, placement=m.placement)
         if not wait_for_server(self.client, self.decide_timeout):
             raise RuntimeError('move_base\'s action server is not there')
         b0 = self.battery
@@ -187,12 +190,13 @@ class TaskRunner:
         b_task = battery_used(b0.percentage, b1.percentage) if b0 is not None and b1 is not None else math.nan
         row.update(mission_status=status, t_task=t_task, b_task=b_task, redecisions=len(self.redecisions))
         if r.decide:
-            e = self.evaluate(status, t_task, b_task if math.isfinite(b_task) else 0.0, r.learn)
+            e = self.evaluate(MISSION_STATUS[status], t_task, b_task if math.isfinite(b_task) else 0.0, r.learn)
             self.say(f'evaluation: {e.message}')
             if e.ok:
                 # decision: what ran (a placement not made is evaluated as the one the task started with)
-                row.update(value=e.result.value, good=e.result.good, label=e.result.label, learned=e.result.learned,
-                           placement=e.result.placement, decision=e.result.decision)
+                row.update(value=e.result.value, good=e.result.good, label=PLACEMENT_WORD[e.result.label],
+                           learned=e.result.learned, placement=e.result.placement,
+                           decision=PLACEMENT_WORD[e.result.decision])
         else:
             self.say(f'{status}: T {t_task:.1f} s, B {b_task:.5f}')
         row['wall_time'] = round(time.monotonic() - w0, 2)

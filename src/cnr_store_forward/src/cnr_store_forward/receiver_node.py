@@ -126,7 +126,7 @@ class ReceiverNode:
             r = self.receiver
             connected = self.out_pub is not None and self.out_pub.get_num_connections() > 0
             msg = StoreForwardStatus(
-                stream=self.cfg.common.stream, role='receiver', epoch=r.epoch, type=self.kind[0],
+                stream=self.cfg.common.stream, role=StoreForwardStatus.RECEIVER, epoch=r.epoch, type=self.kind[0],
                 last_seq=r.last_seq, acked_seq=r.delivered, oldest_unacked_age=math.nan,
                 delivered=r.delivered_count, duplicates=r.duplicates, out_of_order=r.out_of_order, stale=r.stale,
                 consumer_connected=connected, held=self.held)

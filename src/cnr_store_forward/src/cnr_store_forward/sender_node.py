@@ -132,9 +132,9 @@ class SenderNode:
         if q.unacked:
             age = (time.time_ns() - q.stamp_of(q.acked + 1)) / 1e9
         msg = StoreForwardStatus(
-            stream=self.cfg.common.stream, role='sender', epoch=q.epoch, type=self.type[0], last_seq=q.last_seq,
-            acked_seq=q.acked, queued=q.unacked, queued_bytes=q.unacked_bytes, in_flight=s.in_flight,
-            appended=q.appended, sent=s.sent, resent=s.resent, timeouts=s.timeouts, full=q.full,
+            stream=self.cfg.common.stream, role=StoreForwardStatus.SENDER, epoch=q.epoch, type=self.type[0],
+            last_seq=q.last_seq, acked_seq=q.acked, queued=q.unacked, queued_bytes=q.unacked_bytes,
+            in_flight=s.in_flight, appended=q.appended, sent=s.sent, resent=s.resent, timeouts=s.timeouts, full=q.full,
             rejected=q.rejected + self.type_rejected, ignored=self.ignored, oldest_unacked_age=age)
         msg.header.stamp = ros_time(time.time_ns())
         return msg

@@ -27,6 +27,7 @@ from cnr_msgs.srv import AgentCommand, AgentCommandResponse
 from cnr_params.config import EXIT_CONFIG
 from cnr_params.ros import private_section
 from cnr_runtime import init_node, quiet_at_shutdown
+from migration_manager.codes import HEALTH
 from migration_manager.core.config import from_section
 from migration_manager.instance_launch import LaunchError, NodeLaunch, resolve
 
@@ -139,8 +140,10 @@ class Agent:
                 msg.modules.append(s.module)
                 msg.pids.append(s.last_pid)
                 msg.restarts.append(max(0, s.started - 1))
-                msg.states.append('running' if alive else 'restarting' if s.wanted else
-                                  f'exited ({s.last_code})' if s.last_code is not None else 'stopped')
+                state = HEALTH['running' if alive else 'restarting' if s.wanted else
+                               'exited' if s.last_code is not None else 'stopped']
+                msg.states.append(state)
+                msg.exit_codes.append(s.last_code if state == AgentHealth.EXITED else 0)
         msg.header.stamp = rospy.Time.from_sec(time.time())
         try:
             self.health_pub.publish(msg)

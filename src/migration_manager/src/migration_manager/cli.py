@@ -13,7 +13,8 @@ from typing import Dict, List, Optional
 import rospy
 
 from cnr_msgs.msg import Placement
-from cnr_msgs.srv import Migrate
+from cnr_msgs.srv import Migrate, MigrateResponse
+from migration_manager.codes import MODE, OUTCOME_WORD, TARGET
 
 SERVICE = '/migration_manager/migrate'
 
@@ -30,13 +31,16 @@ def main(argv: Optional[List[str]] = None) -> int:
     parser = argparse.ArgumentParser(prog='migrate', description='Move a managed module to a host.')
     parser.add_argument('module', nargs='?', help='e.g. mfg, move_base, local_mapcell_manager, global_goal_manager')
     parser.add_argument('host', nargs='?', help='robot or cloud')
-    parser.add_argument('--mode', choices=('cold', 'hot'), default='', help='default: hot if the module keeps a '
+    parser.add_argument('--mode', choices=[w for w in MODE if w], default='', help='default: hot if the module keeps a '
                         'hot standby (config/migration.yaml hot_standby), else cold')
     parser.add_argument('--placement', action='store_true', help='print where each module is active and exit')
     parser.add_argument('--timeout', type=float, default=10.0, help='s to wait for the manager (default 10)')
     a = parser.parse_args(args)
     if not a.placement and (not a.module or not a.host):
         parser.error('give MODULE HOST, or --placement')
+    if not a.placement and a.host not in TARGET:
+        print(f'migrate: {a.module} -> {a.host}: refused (host must be one of {", ".join(TARGET)})', file=sys.stderr)
+        sys.exit(2)
     rospy.init_node('migrate', anonymous=True, disable_signals=True)
     if a.placement:
         try:
@@ -53,8 +57,8 @@ def main(argv: Optional[List[str]] = None) -> int:
         print(f'migrate: {SERVICE} not available within {a.timeout:g} s (is the migration manager running?)',
               file=sys.stderr)
         sys.exit(3)
-    res = rospy.ServiceProxy(SERVICE, Migrate)(a.module, a.host, a.mode)
+    res = rospy.ServiceProxy(SERVICE, Migrate)(a.module, TARGET[a.host], MODE[a.mode])
     down = f'; hand-over {1000 * res.downtime:.0f} ms' if not math.isnan(res.downtime) else ''
-    print(f'migration {res.id}: {a.module} -> {a.host}: {res.outcome} (term {res.term}, {res.duration:.2f} s{down}): '
-          f'{res.message}')
-    sys.exit(0 if res.ok else 2 if res.outcome == 'refused' else 1)
+    print(f'migration {res.id}: {a.module} -> {a.host}: {OUTCOME_WORD[res.outcome]} (term {res.term}, '
+          f'{res.duration:.2f} s{down}): {res.message}')
+    sys.exit(0 if res.ok else 2 if res.outcome == MigrateResponse.REFUSED else 1)

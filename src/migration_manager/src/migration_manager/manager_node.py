@@ -19,6 +19,7 @@ from cnr_msgs.msg import AgentHealth, InstanceStatus, MigrationEvent, MigrationL
 from cnr_msgs.srv import AgentCommand, InstanceControl, Migrate, MigrateResponse
 from cnr_params.ros import private_section
 from cnr_runtime import call_with_timeout, init_node, quiet_at_shutdown
+from migration_manager.codes import EVENT_MODE, MODE_WORD, OUTCOME, STEP, TARGET_WORD, health_word
 from migration_manager.core import state as state_codec
 from migration_manager.core.config import from_section
 from migration_manager.core.priority import Elevator
@@ -127,7 +128,7 @@ class Manager:
             rospy.Subscriber(topic(m, 'state'), ModuleState, self._on_state, queue_size=2)
             for h in cfg.hosts:
                 rospy.Subscriber(topic(m, f'{h}/status'), InstanceStatus, self._on_status, queue_size=10)
-        self.health: Dict[str, Dict[str, Tuple[str, int]]] = {}       # host -> module -> (state, pid)
+        self.health: Dict[str, Dict[str, Tuple[int, int, int]]] = {}  # host -> module -> (state, exit code, pid)
         for h in cfg.hosts:
             rospy.Subscriber(f'/migration/agents/{h}/health', AgentHealth, self._on_health, queue_size=5)
         rospy.Service('~migrate', Migrate, self._on_migrate)
@@ -191,7 +192,8 @@ class Manager:
 
     def _on_health(self, msg: AgentHealth) -> None:
         with self.lock:
-            self.health[msg.host] = {m: (st, pid) for m, st, pid in zip(msg.modules, msg.states, msg.pids)}
+            self.health[msg.host] = {m: (st, code, pid) for m, st, code, pid
+                                     in zip(msg.modules, msg.states, msg.exit_codes, msg.pids)}
 
     # ------------------------------------------------------------------ calls with timeouts
     def _call(self, proxy, *args) -> Tuple[bool, object]:
@@ -213,8 +215,8 @@ class Manager:
     def _event(self, mid: int, m: Migration, message: str, at: Optional[float] = None) -> None:
         """Publish and log one event; ``at`` (monotonic) is when it happened (the stamp; default now): events
         are published after the actions that made them, which may cross the link."""
-        ev = MigrationEvent(id=mid, module=m.module, source=m.source, target=m.target, mode=m.mode,
-                            step=m.step.value, message=message, term=m.term,
+        ev = MigrationEvent(id=mid, module=m.module, source=m.source, target=m.target, mode=EVENT_MODE[m.mode],
+                            step=STEP[m.step], message=message, term=m.term,
                             downtime=m.downtime if m.step is Step.DONE and m.downtime is not None else math.nan)
         ev.header.stamp = rospy.Time.from_sec(time.time() - (0.0 if at is None else time.monotonic() - at))
         try:
@@ -265,7 +267,7 @@ class Manager:
 
     def _standby(self, book: ModuleBook, host: str) -> bool:
         st = book.status.get(host)
-        return st is not None and st.role == 'standby' and st.ready
+        return st is not None and st.role == InstanceStatus.STANDBY and st.ready
 
     def _poll(self, book: ModuleBook, run: Run) -> List:
         """Events from the world, then deadlines (caller holds the lock)."""
@@ -281,13 +283,14 @@ class Manager:
             if up:
                 return m.target_ready(time.monotonic(), self._holds_replica(book, m.target, m.source))
         if m.step is Step.STARTING:
-            state, pid = self.health.get(m.target, {}).get(m.module, ('', 0))
-            if state.startswith('exited') and pid and pid == run.agent_pid:
-                return m.target_failed(now, f'the standby on {m.target} {state} at start')
+            state, code, pid = self.health.get(m.target, {}).get(m.module, (AgentHealth.STOPPED, 0, 0))
+            if state == AgentHealth.EXITED and pid and pid == run.agent_pid:
+                return m.target_failed(now, f'the standby on {m.target} {health_word(state, code)} at start')
         if m.step is Step.PROMOTING and m.term in book.first_grant:
             return m.target_active(book.first_grant[m.term], m.term)
         st = book.status.get(m.target)
-        if m.step in (Step.PROMOTING,) and st is not None and st.role == 'superseded' and st.term == m.term:
+        if m.step in (Step.PROMOTING,) and st is not None and st.role == InstanceStatus.SUPERSEDED \
+                and st.term == m.term:
             return m.target_failed(now, 'the target was superseded')
         return m.tick(now)
 
@@ -298,7 +301,7 @@ class Manager:
         if verb == 'start_standby':
             with self.lock:
                 st = self.books[m.module].status.get(host)
-                dormant = st is not None and st.role == 'dormant'
+                dormant = st is not None and st.role == InstanceStatus.DORMANT
             if dormant:              # a retired instance asleep there: woken, it is a standby in a moment
                 ok, res = self.control[(m.module, host)].call(command='wake')
                 if ok and res.ok:
@@ -374,18 +377,20 @@ class Manager:
     @quiet_at_shutdown
     def _on_migrate(self, req) -> MigrateResponse:
         started = time.monotonic()
+        refused = MigrateResponse.REFUSED
         if req.module not in self.books:
-            return MigrateResponse(ok=False, outcome='refused', downtime=math.nan,
+            return MigrateResponse(ok=False, outcome=refused, downtime=math.nan,
                                    message=f'{req.module!r} is not managed ({", ".join(self.books)})')
-        if req.target not in self.cfg.hosts:
-            return MigrateResponse(ok=False, outcome='refused', downtime=math.nan,
+        target = TARGET_WORD.get(req.target, '')
+        if target not in self.cfg.hosts:
+            return MigrateResponse(ok=False, outcome=refused, downtime=math.nan,
                                    message=f'target must be one of {", ".join(self.cfg.hosts)}')
-        mode = req.mode or ('hot' if req.module in self.cfg.hot_standby else 'cold')
+        mode = MODE_WORD.get(req.mode, f'code {req.mode}') or ('hot' if req.module in self.cfg.hot_standby else 'cold')
         try:
-            mid, m = self.run_migration(req.module, req.target, mode)
+            mid, m = self.run_migration(req.module, target, mode)
         except ValueError as exc:
-            return MigrateResponse(ok=False, outcome='refused', message=str(exc), downtime=math.nan)
-        outcome = m.step.value
+            return MigrateResponse(ok=False, outcome=refused, message=str(exc), downtime=math.nan)
+        outcome = OUTCOME[m.step.value]
         message = m.events[-1].message if m.events else ''
         if m.woken:
             message += f'; woke the dormant instance on {m.target}'

@@ -82,7 +82,7 @@ class Probe:
 
     def _on_status(self, msg: InstanceStatus) -> None:
         key = (msg.instance, msg.pid, msg.term)
-        if msg.role == 'frozen' and key not in self.frozen_seen:
+        if msg.role == InstanceStatus.FROZEN and key not in self.frozen_seen:
             self.frozen_seen.add(key)
             self._write('frozen', msg.instance, True, msg.header.stamp.to_sec())
 

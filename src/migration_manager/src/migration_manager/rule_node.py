@@ -14,6 +14,7 @@ from cnr_msgs.msg import LinkQuality, Placement
 from cnr_msgs.srv import Migrate
 from cnr_params.ros import private_section
 from cnr_runtime import init_node
+from migration_manager.codes import MODE, OUTCOME_WORD, TARGET
 from migration_manager.core.config import from_section
 from migration_manager.core.rule import PlacementRule, rule_from_section
 
@@ -46,8 +47,8 @@ class RuleNode:
 
     def _order(self, module: str, target: str) -> None:
         try:
-            res = self.migrate(module, target, '')
-            rospy.loginfo(f'migration_rule: {module} -> {target}: {res.outcome} ({res.message})')
+            res = self.migrate(module, TARGET[target], MODE[''])
+            rospy.loginfo(f'migration_rule: {module} -> {target}: {OUTCOME_WORD[res.outcome]} ({res.message})')
         except (rospy.ServiceException, rospy.ROSException) as exc:
             rospy.logwarn(f'migration_rule: {module} -> {target} not ordered: {exc}')
         finally:

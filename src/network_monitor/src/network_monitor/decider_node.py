@@ -22,10 +22,14 @@ import rospy
 
 import cnr_params
 from cnr_msgs.msg import NetworkProfile, Placement, TaskDecision
-from cnr_msgs.srv import (Decide, DecideResponse, EvaluateTask, EvaluateTaskResponse, Migrate, ProfileNow)
+from cnr_msgs.srv import (Decide, DecideResponse, EvaluateTask, EvaluateTaskResponse, Migrate, MigrateResponse,
+                          ProfileNow)
 from cnr_params import ConfigError, Section
 from cnr_params.ros import private_section
 from cnr_runtime import init_node, quiet_at_shutdown
+from migration_manager.codes import MODE, OUTCOME_WORD, TARGET
+from network_monitor.codes import A_BW_METHOD, A_BW_METHOD_WORD
+from network_monitor.decider_codes import EVENT, FORCE_WORD, MISSION_STATUS, MISSION_STATUS_WORD, PLACEMENT, REASON
 from network_monitor.core.advisor import REDECISION, AdvisorError, Profile, RunningTask, TaskAdvisor
 from network_monitor.core.decision import Decision
 from network_monitor.core.decision_config import decision_config
@@ -34,7 +38,7 @@ from network_monitor.core.evaluation import OFFLOAD, ONLOAD
 
 def profile_of(msg: NetworkProfile) -> Profile:
     return Profile(c_l=msg.rtt, r_bw=msg.r_bw, rtt_spread=msg.rtt_spread, loss=msg.loss,
-                   method=msg.a_bw_method, alive=msg.alive)
+                   method=A_BW_METHOD_WORD[msg.a_bw_method], alive=msg.alive)
 
 
 class DeciderNode:
@@ -104,7 +108,7 @@ class DeciderNode:
                     self.advisor.switched(now)
             out = self._message('redecided', task, location, placement, d, profile_of(msg), now)
             out.reason, out.placed, out.placing_time, out.migrations, out.message = \
-                REDECISION, placed, time.monotonic() - t0, moved, f'wanted for {waited:.1f} s; {message}'
+                REASON[REDECISION], placed, time.monotonic() - t0, moved, f'wanted for {waited:.1f} s; {message}'
 
             self.pub.publish(out)
         finally:
@@ -127,21 +131,21 @@ class DeciderNode:
                              f'{self.placement_timeout:g} s)')
                 continue
             try:
-                res = self.migrate(module, host, '')
+                res = self.migrate(module, TARGET[host], MODE[''])
             except (rospy.ServiceException, rospy.ROSException) as exc:
                 notes.append(f'{module} -> {host}: not ordered ({exc})')
                 continue
-            if res.ok and res.outcome == 'done':
+            if res.ok and res.outcome == MigrateResponse.DONE:
                 moved += 1
                 placed += 1
                 now[module] = host
                 notes.append(f'{module} -> {host} in {res.duration:.1f} s ({res.message})')
-            elif res.outcome == 'refused' and f'already on {host}' in res.message:
+            elif res.outcome == MigrateResponse.REFUSED and f'already on {host}' in res.message:
                 placed += 1
                 now[module] = host
                 notes.append(f'{module} already on {host}')
             else:
-                notes.append(f'{module} -> {host}: {res.outcome} ({res.message})')
+                notes.append(f'{module} -> {host}: {OUTCOME_WORD[res.outcome]} ({res.message})')
         return placed == len(hosts), moved, '; '.join(notes), now
 
     def _settled(self, module: str) -> Optional[str]:
@@ -159,10 +163,10 @@ class DeciderNode:
     # ---------------------------------------------------------------- services
     def _message(self, event: str, task: str, location: str, placement: str, d: Decision, p: Profile,
                  hosts: Dict[str, str]) -> TaskDecision:
-        out = TaskDecision(event=event, task=task, location=location, decision=placement, policy=d.policy,
-                           reason=d.reason, confidence=d.confidence, votes_offload=d.votes.get(OFFLOAD, 0),
-                           votes_onload=d.votes.get(ONLOAD, 0), c_l=p.c_l, r_bw=p.r_bw, rtt_spread=p.rtt_spread,
-                           loss=p.loss, profile_method=p.method,
+        out = TaskDecision(event=EVENT[event], task=task, location=location, decision=PLACEMENT[placement],
+                           policy=PLACEMENT[d.policy], reason=REASON[d.reason], confidence=d.confidence,
+                           votes_offload=d.votes.get(OFFLOAD, 0), votes_onload=d.votes.get(ONLOAD, 0), c_l=p.c_l,
+                           r_bw=p.r_bw, rtt_spread=p.rtt_spread, loss=p.loss, profile_method=A_BW_METHOD[p.method],
                            placement=','.join(f'{m}={h}' for m, h in hosts.items()),
                            t_task=math.nan, b_task=math.nan, value=math.nan)
         out.header.stamp = rospy.Time.now()
@@ -236,7 +240,8 @@ class DeciderNode:
         with self.lock:
             try:
                 d, hosts, warnings = self.advisor.begin(req.task, req.location, profile, time.monotonic(),
-                                                        req.force, req.explore)
+                                                        FORCE_WORD.get(req.force, f'code {req.force}'),
+                                                        req.explore)
             except AdvisorError as exc:
                 return DecideResponse(ok=False, message=str(exc))
         for w in warnings:
@@ -267,8 +272,8 @@ class DeciderNode:
             if running is None:
                 return EvaluateTaskResponse(ok=False, message='no task is running (call ~decide first)')
             try:
-                row, control = self.advisor.finish(req.mission_status, req.t_task, req.b_task, time.time(),
-                                                   req.learn)
+                status = MISSION_STATUS_WORD.get(req.mission_status, f'code {req.mission_status}')
+                row, control = self.advisor.finish(status, req.t_task, req.b_task, time.time(), req.learn)
             except (ConfigError, ValueError) as exc:
                 return EvaluateTaskResponse(ok=False, message=str(exc))
         d = running.decision
@@ -276,7 +281,7 @@ class DeciderNode:
                             running.history[-1])
         out.placement = row.placement
         out.mission_status, out.t_task, out.b_task, out.value, out.good, out.label = \
-            row.mission_status, row.t_task, row.b_task, row.value, row.good, row.label
+            MISSION_STATUS[row.mission_status], row.t_task, row.b_task, row.value, row.good, PLACEMENT[row.label]
         out.learned = self.advisor.learned
         out.message = (f'{row.decision} {row.mission_status}: T {row.t_task:.1f} s (CT {control.ct_mean:.1f}), '
                        f'B {row.b_task:.5f} (CB {control.cb_mean:.5f}), value {row.value:.3f} '

@@ -23,6 +23,7 @@ from cnr_msgs.srv import ProfileNow, ProfileNowResponse
 from cnr_params import exit_on_config_error
 from cnr_params.ros import private_section
 from cnr_runtime import init_node, quiet_at_shutdown
+from network_monitor.codes import A_BW_METHOD
 from network_monitor.core import config as monitor_config
 from network_monitor.core.echo import EchoStats, LinkSample, link_state
 from network_monitor.core.estimate import BandwidthEstimator, r_bw
@@ -184,7 +185,7 @@ class Monitor:
             a_bw, age, method = self.estimator.estimate(now, peak)
             probe_bytes = self.probe_bytes
         msg = NetworkProfile(peer=cfg.peer, alive=link.alive, rtt=link.rtt, rtt_spread=link.rtt_spread,
-                             loss=link.loss, c_bw=c_bw, a_bw=a_bw, a_bw_age=age, a_bw_method=method,
+                             loss=link.loss, c_bw=c_bw, a_bw=a_bw, a_bw_age=age, a_bw_method=A_BW_METHOD[method],
                              r_bw=r_bw(a_bw, c_bw, cfg.c_bw_floor), interface=self.interface,
                              probe_bytes=probe_bytes)
         msg.header.stamp = rospy.Time.now()
