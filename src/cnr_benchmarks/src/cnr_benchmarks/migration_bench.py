@@ -29,6 +29,7 @@ import yaml
 
 from cnr_benchmarks import report
 from migration_manager.cli import parse_placement
+from migration_manager.codes import ROLE_WORD
 from cnr_benchmarks.core.migration import (OUTPUT_TOPIC, Group, group_results, handover_downtime, handover_gap,
                                            output_flowing, output_period, read_probe, stray_outputs)
 
@@ -76,7 +77,8 @@ class Bench:
     def role(self, module: str, side: str) -> str:
         out = self.ns(side, 'rostopic', 'echo', '-n', '1', f'/migration/{module}/{side}/status', timeout=15)
         try:
-            return yaml.safe_load(out.stdout.split('---')[0]).get('role', '') if out.returncode == 0 else ''
+            doc = yaml.safe_load(out.stdout.split('---')[0]) if out.returncode == 0 else {}
+            return ROLE_WORD.get(doc.get('role'), '')
         except (yaml.YAMLError, AttributeError):
             return ''
 

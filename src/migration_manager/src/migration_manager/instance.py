@@ -46,6 +46,7 @@ from cnr_msgs.srv import InstanceControl, InstanceControlResponse
 from cnr_params.ros import private_section
 from cnr_runtime import call_with_timeout, distinct_callerid, quiet_at_shutdown
 from std_srvs.srv import Empty
+from migration_manager.codes import ROLE
 from migration_manager.core import state as state_codec
 from migration_manager.core.config import MigrationConfig, from_section
 from migration_manager.core.lease import Answer, Holder, host_of, instance_id
@@ -225,7 +226,7 @@ class ManagedInstance:
         # a node that prepares replicas names the newest prepared (package README, "Waiting for a replica")
         with self.replica_lock:
             replica_of, replica_seq = self.prepared if self.prepares else (self.replica.instance, self.replica.seq)
-        msg = InstanceStatus(module=self.module, instance=self.id, role=role, term=self.holder.term,
+        msg = InstanceStatus(module=self.module, instance=self.id, role=ROLE[role], term=self.holder.term,
                              ready=ready, pid=os.getpid(), message=self.message, replica_of=replica_of,
                              replica_seq=replica_seq)
         # frozen: stamped with the moment the outputs were closed (a consumer measures the downtime from it)
