@@ -1,6 +1,6 @@
 """The Kinect's depth stream to move_base: its bandwidth on the wire and move_base's CPU per frame.
 
-    /usr/bin/python3 -m cnr_benchmarks.depth [--out bench_results/depth.json] [--seconds 30]
+    /usr/bin/python3 -m cnr_benchmarks.depth [--out bench_results/sim/depth.json] [--seconds 30]
 
 The thesis measured 3.4 Mbit/s for the Kinect data move_base consumed. The simulated TurtleBot (cnr_bringup
 robot.launch: simulator, map_server, move_base; real time; the robot standing at the corridor's start, its
@@ -18,7 +18,6 @@ and writes them as JSON (name, value, unit, target), as the other benchmarks of 
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import shutil
 import tempfile
@@ -30,9 +29,9 @@ from typing import Dict, List, Tuple
 import psutil
 import yaml
 
+from cnr_benchmarks.results import WS, save_json, scratch_dir
 from cnr_harness import RosMaster, wait_until
 
-WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
 TOPIC = 'camera/depth/points'
 TCPROS_PREFIX = 4          # bytes: each message on a TCPROS connection is preceded by its length
 
@@ -102,7 +101,7 @@ def run(master: RosMaster, rospy, config_dir: str, seconds: float, warmup: float
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--out', default=os.path.join(WS, 'bench_results', 'depth.json'))
+    ap.add_argument('--out', default=os.path.join(scratch_dir('sim'), 'depth.json'))
     ap.add_argument('--seconds', type=float, default=30.0, help='wall seconds measured per run')
     ap.add_argument('--warmup', type=float, default=5.0, help='wall seconds before each measurement')
     args = ap.parse_args()
@@ -134,10 +133,7 @@ def main() -> None:
     report('move_base CPU without the depth source', 100 * without['cpu'] / without['wall'], '% of a core')
     per_frame = (w['cpu'] / w['wall'] - without['cpu'] / without['wall']) / (w['frames'] / w['wall'])
     report('move_base CPU per depth frame (both costmaps)', 1e3 * per_frame, 'ms')
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with open(args.out, 'w') as f:
-        json.dump(results, f, indent=1)
-    print(f'wrote {args.out}')
+    save_json(args.out, results)
 
 
 if __name__ == '__main__':

@@ -244,7 +244,7 @@ class Bench:
 
 def write_markdown(out: str, args: argparse.Namespace, results: List[Dict], failovers: List[Dict],
                    summary: Dict, aborted: int, started: str, probe_file: str) -> None:
-    from cnr_benchmarks.core.migration import percentile
+    from cnr_benchmarks.core.stats import percentile
     header = list(Group.HEADER)
     probe = read_probe(probe_file) if os.path.exists(probe_file) else []
     periods = {m: output_period(probe, m) for m in args.modules}

@@ -93,7 +93,7 @@ def cleanup_node(side, node: str) -> int:
 
 
 def load_params(side) -> None:
-    from cnr_navigation.startup_audit import load_navigation_params
+    from cnr_benchmarks.startup_audit import load_navigation_params
     from cnr_testbed import netns
     with netns.inside(side.namespace):
         load_navigation_params(xmlrpc.client.ServerProxy(side.master_uri))

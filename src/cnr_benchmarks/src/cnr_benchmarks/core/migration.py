@@ -24,9 +24,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Dict, Iterable, List, Optional, Sequence, Tuple
+from typing import Dict, List, Optional, Sequence, Tuple
 
 import numpy as np
+
+from cnr_benchmarks.core.stats import percentile
 
 # which output tells, on the consumer's side, that a module is working
 OUTPUT_TOPIC = {
@@ -173,11 +175,6 @@ def stray_outputs(rows: Sequence[ProbeRow], module: str, source: str, target: st
     if first_new is None:
         return 0
     return sum(1 for r in window if r.instance == f'{module}@{source}' and r.time > first_new)
-
-
-def percentile(values: Iterable[float], q: float) -> float:
-    v = [x for x in values if x is not None and math.isfinite(x)]
-    return float(np.percentile(v, q)) if v else math.nan
 
 
 @dataclass

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass
-from typing import Dict, Sequence
+from typing import Dict, Iterable, Optional, Sequence
 
 import numpy as np
 
@@ -55,3 +55,9 @@ def summarize(samples: Sequence[float]) -> Summary:
                    upper_bound=mean + margin, lower_bound=mean - margin, max=float(x.max()),
                    min=float(x.min()), range=float(x.max() - x.min()), variance=variance,
                    std_err=err, median=float(np.median(x)))
+
+
+def percentile(values: Iterable[Optional[float]], q: float) -> float:
+    """The ``q``-th percentile (0..100, linear interpolation) of the finite ``values``; NaN when there are none."""
+    v = [x for x in values if x is not None and math.isfinite(x)]
+    return float(np.percentile(v, q)) if v else math.nan

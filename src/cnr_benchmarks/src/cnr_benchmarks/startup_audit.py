@@ -1,6 +1,6 @@
 """What a move_base start-up costs the master: XML-RPC calls by method, and the start-up time.
 
-    /usr/bin/python3 -m cnr_navigation.startup_audit [--out bench_results/move_base_startup.json]
+    /usr/bin/python3 -m cnr_benchmarks.startup_audit [--out bench_results/sim/move_base_startup.json]
 
 A private rosmaster on a free port runs the simulator and holds move_base's parameters (loaded from
 config/navigation as move_base.launch loads them); move_base itself is started with ROS_MASTER_URI
@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import collections
-import json
 import os
 import threading
 import time
@@ -19,10 +18,10 @@ import xmlrpc.client
 from socketserver import ThreadingMixIn
 from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
 
+from cnr_benchmarks.results import WS, save_json, scratch_dir
 from cnr_harness import RosMaster, wait_until
 from cnr_navigation.core.param_files import navigation_tree
 
-WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
 
 PARAM_METHODS = {'getParam', 'hasParam', 'searchParam', 'setParam', 'subscribeParam', 'unsubscribeParam',
                  'deleteParam', 'getParamNames'}
@@ -94,16 +93,13 @@ def audit(timeout: float = 120.0) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--out', default=os.path.join(WS, 'bench_results', 'move_base_startup.json'))
+    ap.add_argument('--out', default=os.path.join(scratch_dir('sim'), 'move_base_startup.json'))
     args = ap.parse_args()
     result = audit()
     print(f"move_base start-up: {result['startup_seconds']:.2f} s, {result['parameter_calls']} parameter calls, "
           f"{result['registrations']} registrations, {result['total_calls']} master calls in all")
     print('  ' + ', '.join(f'{k} {v}' for k, v in sorted(result['calls'].items())))
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with open(args.out, 'w') as f:
-        json.dump(result, f, indent=1)
-    print(f'wrote {args.out}')
+    save_json(args.out, result)
 
 
 if __name__ == '__main__':

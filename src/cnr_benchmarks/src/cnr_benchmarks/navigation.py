@@ -1,6 +1,6 @@
 """Navigation benchmark: global plan across the data-center hall, one control-loop cycle, one depth frame.
 
-    /usr/bin/python3 -m cnr_navigation.bench [--out bench_results/navigation.json]
+    /usr/bin/python3 -m cnr_benchmarks.navigation [--out bench_results/sim/navigation.json]
 
 Uses the TurtleBot configuration as the move_base node reads it from config/navigation (robot radius
 0.20 m, inflation 0.5 m, k 5, DWA with 6 x 20 samples over 1.0 s), 640-beam scans and 80 x 60 depth clouds
@@ -9,7 +9,6 @@ Uses the TurtleBot configuration as the move_base node reads it from config/navi
 from __future__ import annotations
 
 import argparse
-import json
 import math
 import os
 import statistics
@@ -17,14 +16,13 @@ import time
 
 import numpy as np
 
+from cnr_benchmarks.results import WS, save_json, scratch_dir
 from cnr_navigation.core.costmap import GridGeometry, LayeredCostmap, scan_to_observation
 from cnr_navigation.core.dwa import DWAController
 from cnr_navigation.core.geometry import Pose2D, quaternion_to_matrix
 from cnr_navigation.core.param_files import read_config
 from cnr_navigation.core.planner import GlobalPlanner, PlanningGrid
 from cnr_navigation.core.pointcloud import cloud_to_observation, cloud_xyz
-
-WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
 
 
 def hall_costmap() -> LayeredCostmap:
@@ -99,7 +97,7 @@ def depth_times(n: int) -> list:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--out', default=os.path.join(WS, 'bench_results', 'navigation.json'))
+    ap.add_argument('--out', default=os.path.join(scratch_dir('sim'), 'navigation.json'))
     ap.add_argument('--runs', type=int, default=20)
     args = ap.parse_args()
     results = []
@@ -117,10 +115,7 @@ def main() -> None:
     report('control loop (local costmap + DWA, 640 beams)', control_times(args.runs * 10), 'ms', '<= 10')
     depth_times(3)
     report('depth frame into the local costmap (80 x 60)', depth_times(args.runs * 10), 'ms', '-')
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with open(args.out, 'w') as f:
-        json.dump(results, f, indent=1)
-    print(f'wrote {args.out}')
+    save_json(args.out, results)
 
 
 if __name__ == '__main__':

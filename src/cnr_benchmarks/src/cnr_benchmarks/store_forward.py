@@ -1,7 +1,7 @@
 """Figures of cnr_store_forward on one private master (a free port): the latency the relay adds, the rate at
 which a backlog drains after an outage, the rate the sender stores records at, and what fsync costs.
 
-    /usr/bin/python3 -m cnr_store_forward.bench --config config/store_forward.yaml [--out FILE.json]
+    /usr/bin/python3 -m cnr_benchmarks.store_forward [--config config/store_forward.yaml] [--out FILE.json]
 
 Needs the workspace sourced (the nodes run through rosrun). Records are cnr_msgs/MergedMeasurement (68 bytes
 serialized with an empty frame_id; the merger's, with frame_id map, are 71). Latency: a record's wall-clock
@@ -22,6 +22,8 @@ from typing import Any, Dict, List, Optional
 
 from cnr_harness import RosMaster, wait_until
 from cnr_params import load_yaml
+from cnr_benchmarks import results
+from cnr_benchmarks.core.stats import percentile
 from cnr_store_forward.core.queue import DiskQueue
 
 IN, OUT = '/sf_bench/in', '/sf_bench/out'
@@ -48,10 +50,6 @@ def fsync_cost(directory: str, records: int, size: int) -> List[Dict[str, Any]]:
     return rows
 
 
-def percentile(x: List[float], q: float) -> float:
-    return statistics.quantiles(x, n=100, method='inclusive')[int(q) - 1] if len(x) > 1 else x[0]
-
-
 class Bench:
     """The bench's rospy node on ``master``, running a sender and a receiver with ``params`` (+ changes)."""
 
@@ -75,6 +73,14 @@ class Bench:
     def start(self, role: str, stream: str):
         return self.master.run(['rosrun', 'cnr_store_forward', role, f'__name:=sf_{role}_{stream}'],
                                f'sf_{role}_{stream}')
+
+    def stop(self, pub, subs: List, procs: List) -> None:
+        """Unregister the bench's publisher and subscribers, stop the sender and receiver processes."""
+        for s in subs:
+            s.unregister()
+        pub.unregister()
+        for p in procs:
+            self.master.stop_child(p)
 
     def latency(self, changes: Dict[str, Any], count: int, rate: float) -> Dict[str, Any]:
         import rospy
@@ -104,11 +110,7 @@ class Bench:
                 time.sleep(max(0.0, t - time.monotonic()))
             wait_until(lambda: len(relayed) >= count and len(direct) >= count, 60, 'every record relayed')
         finally:
-            for s in subs:
-                s.unregister()
-            pub.unregister()
-            for p in procs:
-                self.master.stop_child(p)
+            self.stop(pub, subs, procs)
         d, r = [1e3 * x for x in direct], [1e3 * x for x in relayed]
         return {'changes': changes, 'count': count, 'rate_hz': rate, 'direct_median_ms': statistics.median(d),
                 'relayed_median_ms': statistics.median(r), 'relayed_p95_ms': percentile(r, 95),
@@ -147,11 +149,7 @@ class Bench:
             procs.append(self.start('receiver', stream))
             wait_until(lambda: len(arrived) >= count, 600, 'the backlog drained', sender)
         finally:
-            for s in subs:
-                s.unregister()
-            pub.unregister()
-            for p in procs:
-                self.master.stop_child(p)
+            self.stop(pub, subs, procs)
         first, last = arrived[0], arrived[-1]
         return {'changes': changes, 'count': count, 'store_records_per_s_at_least': count / stored,
                 'first_after_receiver_start_s': first - t1,
@@ -168,7 +166,7 @@ def table(rows: List[Dict[str, Any]], keys: List[str]) -> str:
 
 def main(argv: Optional[List[str]] = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    ap.add_argument('--config', required=True, help='config/store_forward.yaml')
+    ap.add_argument('--config', default=os.path.join(results.WS, 'config', 'store_forward.yaml'))
     ap.add_argument('--out', help='write the figures here as JSON')
     ap.add_argument('--latency-count', type=int, default=300)
     ap.add_argument('--latency-rate', type=float, default=10.0)
@@ -176,26 +174,25 @@ def main(argv: Optional[List[str]] = None) -> int:
     args = ap.parse_args(argv)
     params = load_yaml(args.config)
     tmp = tempfile.mkdtemp(prefix='sf-bench-')
-    results: Dict[str, Any] = {'fsync': fsync_cost(os.path.join(tmp, 'fsync'), 2000, 71)}
-    print(table(results['fsync'], ['mode', 'records', 'us_per_record', 'records_per_s']), flush=True)
+    figures: Dict[str, Any] = {'fsync': fsync_cost(os.path.join(tmp, 'fsync'), 2000, 71)}
+    print(table(figures['fsync'], ['mode', 'records', 'us_per_record', 'records_per_s']), flush=True)
     with RosMaster(log_dir=os.path.join(tmp, 'logs'), caller='/sf_bench') as master:
         os.environ['ROS_MASTER_URI'] = master.uri
         os.environ['ROS_IP'] = '127.0.0.1'
         import rospy
         rospy.init_node('sf_bench', anonymous=True, disable_signals=True)
         bench = Bench(master, params, tmp)
-        results['latency'] = [bench.latency(c, args.latency_count, args.latency_rate) for c in (
+        figures['latency'] = [bench.latency(c, args.latency_count, args.latency_rate) for c in (
             {}, {'sync_period': 0.0}, {'fsync': False, 'sync_period': 0.0})]
-        print(table(results['latency'], ['changes', 'rate_hz', 'direct_median_ms', 'relayed_median_ms',
+        print(table(figures['latency'], ['changes', 'rate_hz', 'direct_median_ms', 'relayed_median_ms',
                                          'relayed_p95_ms', 'added_median_ms']), flush=True)
-        results['drain'] = [bench.drain(c, args.drain_count) for c in (
+        figures['drain'] = [bench.drain(c, args.drain_count) for c in (
             {}, {'rate': 50.0, 'batch_records': 100, 'window': 1000})]
-        print(table(results['drain'], ['changes', 'count', 'store_records_per_s_at_least',
+        print(table(figures['drain'], ['changes', 'count', 'store_records_per_s_at_least',
                                        'first_after_receiver_start_s', 'drain_records_per_s']), flush=True)
         rospy.signal_shutdown('bench done')
     if args.out:
-        with open(args.out, 'w') as stream:
-            json.dump(results, stream, indent=1)
+        results.save_json(args.out, figures)
     return 0
 
 

@@ -1,6 +1,8 @@
 """Testbed benchmark: added RTT versus the setting, shaped and unshaped throughput (needs root).
 
-    /usr/bin/python3 -m cnr_testbed.bench [--out bench_results]     (launch_scripts/bench_testbed.sh)
+    launch_scripts/bench_testbed.sh [--out DIR]
+
+Writes docs/results/testbed/ (or DIR): README.md and testbed.tsv.
 
 Added RTT: ping (50 probes, 20 ms apart) from the robot namespace to the cloud with the one-way delay set
 to half the RTT on both directions, minus the RTT at 0 ms. Throughput: iperf3 (TCP, 5 s) robot -> cloud.
@@ -9,16 +11,15 @@ Targets (issue): added RTT within +/-1 ms from 0 to 200 ms; throughput within 5 
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import re
 import subprocess
 import time
+from typing import List, Optional
 
+from cnr_benchmarks import cli, report, results
 from cnr_testbed.api import Testbed
-
-WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
 
 
 def ping_avg(tb: Testbed, count: int = 50) -> float:
@@ -44,14 +45,14 @@ def iperf(tb: Testbed, seconds: float = 5.0) -> float:
         server.wait()
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--out', default=os.path.join(WS, 'bench_results'))
-    args = ap.parse_args()
-    os.makedirs(args.out, exist_ok=True)
+def main(argv: Optional[List[str]] = None) -> int:
+    ap = cli.parser(__name__, __doc__)
+    ap.add_argument('--out', default=results.results_dir('testbed'), help="the page's folder (default %(default)s)")
+    args = ap.parse_args(argv)
+    cli.require_root(ap.prog, 'network namespaces and TUN devices')
     rows = []
     name = f'tbb{os.getpid() % 10000}'
-    tb = Testbed(os.path.join(WS, 'config', 'testbed.yaml'),
+    tb = Testbed(os.path.join(results.WS, 'config', 'testbed.yaml'),
                  {'name': name, 'robot.namespace': f'{name}-robot', 'cloud.namespace': f'{name}-cloud',
                   'robot.device': f'{name}-r', 'cloud.device': f'{name}-c'})
     with tb:
@@ -75,16 +76,16 @@ def main() -> None:
                 ok = mbit >= 100
                 rows.append(('throughput', 'unshaped', 'Mbit/s', round(mbit, 1), '>= 100' if ok else 'BELOW'))
             print(f'rate {rate or "unshaped"}: {mbit:.2f} Mbit/s ({"ok" if ok else "OFF"})', flush=True)
-    with open(os.path.join(args.out, 'testbed.tsv'), 'w') as f:
-        f.write('quantity\tsetting\tunit\tmeasured\tcheck\n')
-        for r in rows:
-            f.write('\t'.join(map(str, r)) + '\n')
-    md = ['| quantity | setting | measured | check |', '|---|---|---|---|']
-    md += [f'| {q} | {s} {u} | {m} {u} | {c} |' for q, s, u, m, c in rows]
-    text = '\n'.join(md) + f'\n\nbase RTT through the emulator: {base:.3f} ms; command: launch_scripts/bench_testbed.sh\n'
-    open(os.path.join(args.out, 'testbed.md'), 'w').write(text)
-    print(text)
+    os.makedirs(args.out, exist_ok=True)
+    results.write_tsv(os.path.join(args.out, 'testbed.tsv'), ['quantity', 'setting', 'unit', 'measured', 'check'],
+                      rows)
+    table = report.markdown_table(['quantity', 'setting', 'measured', 'check'],
+                                  [[q, f'{s} {u}', f'{m} {u}', c] for q, s, u, m, c in rows])
+    print(results.write_page(args.out, 'Link emulator', 'thesis Appendix I: `tc` between robot and cloud',
+                             f'{table}\n\nbase RTT through the emulator: {base:.3f} ms; rows in testbed.tsv.\n',
+                             cli.command(ap, argv)))
+    return 0
 
 
 if __name__ == '__main__':
-    main()
+    raise SystemExit(main())

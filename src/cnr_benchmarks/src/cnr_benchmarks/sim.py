@@ -1,25 +1,23 @@
 """Simulator benchmark: core speed without ROS, time per laser scan and per depth frame, real-time factor with ROS I/O.
 
-    /usr/bin/python3 -m cnr_sim.bench [--out bench_results/sim.json] [--sim-seconds 600]
+    /usr/bin/python3 -m cnr_benchmarks.sim [--out bench_results/sim/sim.json] [--sim-seconds 600]
 
 Prints one line per figure and writes them as JSON (name, value, unit, target).
 """
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import time
 
 import numpy as np
 
+from cnr_benchmarks.results import WS, save_json, scratch_dir
 from cnr_harness import RosMaster, wait_until
 from cnr_maps.mapio import load_map
 from cnr_maps.pose import Pose2D
 from cnr_sim.core.world import World
 from cnr_sim.params import config_section, read_depth_camera, read_laser, read_limits, read_world
-
-WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
 
 
 def turtlebot_world(map_yaml: str, start: Pose2D) -> World:
@@ -51,21 +49,13 @@ def core_rtf(map_yaml: str, start: Pose2D, sim_seconds: float) -> tuple:
     return sim_seconds / wall, steps / wall, scans
 
 
-def scan_time(map_yaml: str, start: Pose2D, n: int = 2000) -> float:
-    world = turtlebot_world(map_yaml, start)
-    world.scan()
+def sensor_time(map_yaml: str, start: Pose2D, sensor: str, n: int = 2000) -> float:
+    """Milliseconds per call of the world's ``sensor`` (``scan`` or ``depth_frame``), after a warm-up call."""
+    render = getattr(turtlebot_world(map_yaml, start), sensor)
+    render()
     t0 = time.perf_counter()
     for _ in range(n):
-        world.scan()
-    return (time.perf_counter() - t0) / n * 1e3
-
-
-def depth_time(map_yaml: str, start: Pose2D, n: int = 2000) -> float:
-    world = turtlebot_world(map_yaml, start)
-    world.depth_frame()
-    t0 = time.perf_counter()
-    for _ in range(n):
-        world.depth_frame()
+        render()
     return (time.perf_counter() - t0) / n * 1e3
 
 
@@ -90,7 +80,7 @@ def ros_rtf(wall_seconds: float) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--out', default=os.path.join(WS, 'bench_results', 'sim.json'))
+    ap.add_argument('--out', default=os.path.join(scratch_dir('sim'), 'sim.json'))
     ap.add_argument('--sim-seconds', type=float, default=600.0, help='simulated seconds per core run')
     ap.add_argument('--ros-seconds', type=float, default=20.0, help='wall seconds of the ROS I/O run')
     args = ap.parse_args()
@@ -106,13 +96,10 @@ def main() -> None:
         rtf, steps, _ = core_rtf(path, start, args.sim_seconds)
         report(f'sim core real-time multiple ({label})', rtf, 'x', '>= 1000')
         report(f'sim core steps per second ({label})', steps, 'steps/s', '-')
-        report(f'time per 640-beam scan ({label})', scan_time(path, start), 'ms', '-')
-        report(f'time per 80x60 depth frame ({label})', depth_time(path, start), 'ms', '-')
+        report(f'time per 640-beam scan ({label})', sensor_time(path, start, 'scan'), 'ms', '-')
+        report(f'time per 80x60 depth frame ({label})', sensor_time(path, start, 'depth_frame'), 'ms', '-')
     report('sim with ROS I/O, as fast as possible', ros_rtf(args.ros_seconds), 'x real time', '>= 20')
-    os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
-    with open(args.out, 'w') as f:
-        json.dump(results, f, indent=1)
-    print(f'wrote {args.out}')
+    save_json(args.out, results)
 
 
 if __name__ == '__main__':

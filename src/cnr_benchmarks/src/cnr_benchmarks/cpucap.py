@@ -1,7 +1,9 @@
 """Benchmark of the robot's CPU cap (needs root): achieved slowdown and scheduling jitter.
 
-    /usr/bin/python3 -m cnr_testbed.cpucap_bench [--out bench_results] [--repeats 3]
-                                                  (launch_scripts/bench_cpucap.sh)
+    launch_scripts/bench_cpucap.sh [--out DIR] [--repeats N] [--seconds S]
+
+Measures the robot's CPU cap (config/testbed.yaml testbed.robot_cpu). Needs root; about a minute. Writes the page
+docs/results/cpucap/README.md (or DIR/README.md); the raw figures go to bench_results/cpucap/cpucap.json.
 
 (a) Cap and slowdown: the CPU share a hog in the cgroup gets (usage over wall time) against the configured
 limit (``testbed.robot_cpu``); then a CPU-bound Python loop (fixed work, timed inside the child, interpreter
@@ -17,7 +19,6 @@ lateness of each wake-up (median, p95, max over every run). Periods whose quota 
 """
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import statistics
@@ -26,6 +27,8 @@ import sys
 import time
 from typing import Dict, List, Optional, Tuple
 
+from cnr_benchmarks import cli, results
+from cnr_benchmarks.core.stats import percentile
 from cnr_testbed import cpucap
 from cnr_testbed.core import cpucap as core
 from cnr_testbed.core.config import load_testbed
@@ -93,18 +96,14 @@ def lateness(n: int, cgroup: Optional[str], hog: bool) -> List[float]:
             p.wait()
 
 
-def pct(values: List[float], q: float) -> float:
-    s = sorted(values)
-    return s[min(len(s) - 1, int(round(q * (len(s) - 1))))]
-
-
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--out', default=os.path.join(cpucap.WS, 'bench_results'))
+def main(argv: Optional[List[str]] = None) -> int:
+    ap = cli.parser(__name__, __doc__)
+    ap.add_argument('--out', default=results.results_dir('cpucap'), help='the page\'s folder (default %(default)s)')
     ap.add_argument('--config', default=cpucap.CONFIG)
-    ap.add_argument('--repeats', type=int, default=3)
+    ap.add_argument('--repeats', type=cli.positive_int, default=3)
     ap.add_argument('--seconds', type=float, default=3.0, help='per jitter run')
-    args = ap.parse_args()
+    args = ap.parse_args(argv)
+    cli.require_root(ap.prog, 'cgroups')
     cfg = load_testbed(args.config).robot_cpu
     layout = cpucap.detect()
     load0 = open('/proc/loadavg').read().split()[:3]
@@ -152,19 +151,15 @@ def main() -> int:
                 cg.remove(kill=True)
             rows.append(dict(setting=f'period {period} us', period_us=period, late=late, throttled=throttled))
             print(f"period {period:6d} us: lateness median {1e3 * statistics.median(late):.2f} ms, p95 "
-                  f"{1e3 * pct(late, 0.95):.2f} ms, max {1e3 * max(late):.2f} ms", flush=True)
+                  f"{1e3 * percentile(late, 95):.2f} ms, max {1e3 * max(late):.2f} ms", flush=True)
         out['jitter'] = rows
     finally:
         if cg.exists():
             cg.remove(kill=True)
     out['loadavg'] = [load0, open('/proc/loadavg').read().split()[:3]]
-    os.makedirs(args.out, exist_ok=True)
-    with open(os.path.join(args.out, 'cpucap.json'), 'w') as f:
-        json.dump(out, f, indent=1)
-    text = report(out)
-    with open(os.path.join(args.out, 'cpucap.md'), 'w') as f:
-        f.write(text)
-    print(text)
+    results.save_json(os.path.join(results.scratch_dir('cpucap'), 'cpucap.json'), out)
+    print(results.write_page(args.out, "The robot's CPU cap", 'thesis Table 3-1, Appendix IV', report(out),
+                             cli.command(ap, argv)))
     return 0
 
 
@@ -174,8 +169,8 @@ def report(out: Dict) -> str:
     def span(values: List[float]) -> str:
         return f'{min(values):.3f}-{max(values):.3f}'
 
-    lines = [f"# Robot CPU cap (cgroup v{out['cgroup_version']}): {out['cpus']:.4g} CPU "
-             f"(slowdown {out['slowdown']:g}), period {out['period_us']} us", '',
+    lines = [f"cgroup v{out['cgroup_version']}: {out['cpus']:.4g} CPU (slowdown {out['slowdown']:g}), period "
+             f"{out['period_us']} us.", '',
              '## (a) Cap and slowdown of a CPU-bound Python loop', '',
              f"CPU hog in the cgroup: {out['share']:.4f} CPU (limit {out['cpus']:.4f}).", '',
              f"{w['iterations']} iterations, {len(w['inside'])} alternating runs: uncapped "
@@ -197,9 +192,8 @@ def report(out: Dict) -> str:
         quota = f"{round(out['cpus'] * r['period_us'])} us" if 'period_us' in r else '-'
         thr = ', '.join(f'{100 * t:.0f} %' for t in r.get('throttled', [])) or '-'
         lines.append(f"| {r['setting']} | {quota} | {1e3 * statistics.median(late):.2f} ms | "
-                     f"{1e3 * pct(late, 0.95):.2f} ms | {1e3 * max(late):.2f} ms | {thr} |")
-    lines += ['', f"Load average before/after: {' '.join(out['loadavg'][0])} / {' '.join(out['loadavg'][1])}.",
-              'Command: launch_scripts/bench_cpucap.sh', '']
+                     f"{1e3 * percentile(late, 95):.2f} ms | {1e3 * max(late):.2f} ms | {thr} |")
+    lines += ['', f"Load average before/after: {' '.join(out['loadavg'][0])} / {' '.join(out['loadavg'][1])}.", '']
     return '\n'.join(lines)
 
 
