@@ -163,3 +163,29 @@ def test_the_launches_set_the_parameter_rospy_reads_on_every_log_call():
         root = ET.parse(os.path.join(SRC, rel)).getroot()
         params = {p.get('name'): p.get('value') for p in root.findall('param')}
         assert params.get('/rosout_disable_topics_generation') == 'false', f'{rel} does not set it'
+
+
+HISTORY_WORD = re.compile(r'session [0-9]', re.IGNORECASE)
+HISTORY_STAMP = re.compile(r'_s[0-9]+[a-z]?(?=[._])')        # e.g. migration_s25_hot.md, results_s3.tsv
+
+
+def test_the_tracked_files_speak_of_the_product_not_of_its_history():
+    """No tracked text file says "session N", and no tracked file name carries a history stamp such as ``_s25``:
+    the product describes itself as it is (git keeps the history). Reads ``git ls-files``; no master."""
+    names = subprocess.run(['git', 'ls-files', '-z'], cwd=WS, capture_output=True, check=True).stdout
+    words, stamps = [], []
+    for name in filter(None, names.decode().split('\0')):
+        if HISTORY_STAMP.search(os.path.basename(name)):
+            stamps.append(name)
+        path = os.path.join(WS, name)
+        if not os.path.isfile(path):        # deleted in the working tree
+            continue
+        with open(path, 'rb') as f:
+            data = f.read()
+        if b'\0' in data[:8192]:            # binary (images)
+            continue
+        for number, line in enumerate(data.decode('utf-8', 'replace').splitlines(), 1):
+            if HISTORY_WORD.search(line):
+                words.append(f'{name}:{number}: {line.strip()[:100]}')
+    assert not words, 'history words in tracked files:\n' + '\n'.join(words)
+    assert not stamps, 'history stamps in tracked file names:\n' + '\n'.join(stamps)
