@@ -171,7 +171,7 @@ def test_cold_round_trip_is_make_before_break(bed):
         assert switch_is_clean(outputs, f'{MODULE}@{source}', f'{MODULE}@{target}'), outputs
         gap = largest_gap(bed.answers(t0 - 0.5))
         print(f'cold {source}->{target}: {res.stdout.strip()}; consumer gap {1000 * gap:.0f} ms')
-        assert gap < 2.0                         # the issue's target for cold migration
+        assert gap < 2.0                         # the target for cold migration
         assert bed.placement()[MODULE][0] == target
         # the source's instance is gone (cold): its agent stopped it
         wait_until(lambda: bed.status(source) is None or bed.status(source)['role'] in ('frozen', 'superseded'), 30,

@@ -1,6 +1,6 @@
 """The bridge between two real masters in the testbed's robot and cloud namespaces (root).
 
-Checks the issue's deadlines on an unshaped link: a new publisher reaches the other master in <= 0.5 s; during
+Checks the bridge's deadlines on an unshaped link: a new publisher reaches the other master in <= 0.5 s; during
 an outage the peer is lost in <= 2 s and its registrations are gone <= 3 s after the outage began; after the
 link returns the registrations are back in <= 1 s and a rospy subscriber receives again; stock tools work
 across; a stranger's heartbeats are ignored and logged; a local node is never shut down by a proxy; a stopped

@@ -2,7 +2,7 @@
 
 Runs bench_profile's reduced grid (``python3 -m cnr_benchmarks.profile_bench --quick``: two masters, bridges and
 a monitor per host on a testbed instance of its own) and checks the 150 ms x 50 Mbit/s cell against the
-issue's targets: RTT within 2 ms of the set RTT plus the unshaped baseline, A_bw within 10 %, the passive
+targets: RTT within 2 ms of the set RTT plus the unshaped baseline, A_bw within 10 %, the passive
 estimate within 20 %. About two minutes.
 """
 import csv

@@ -6,7 +6,7 @@ Writes docs/results/testbed/ (or DIR): README.md and testbed.tsv.
 
 Added RTT: ping (50 probes, 20 ms apart) from the robot namespace to the cloud with the one-way delay set
 to half the RTT on both directions, minus the RTT at 0 ms. Throughput: iperf3 (TCP, 5 s) robot -> cloud.
-Targets (issue): added RTT within +/-1 ms from 0 to 200 ms; throughput within 5 % of 1-50 Mbit/s;
+Targets: added RTT within +/-1 ms from 0 to 200 ms; throughput within 5 % of 1-50 Mbit/s;
 >= 100 Mbit/s unshaped.
 """
 from __future__ import annotations

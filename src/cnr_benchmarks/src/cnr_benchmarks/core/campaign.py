@@ -224,7 +224,7 @@ def agrees(decision: str, oracle_label: str) -> bool:
 def constant_accuracy(placement: str, oracle_labels: Sequence[str]) -> float:
     """Accuracy of always deciding ``placement`` against the oracle labels. Never offloading is one of the static
     threshold rules (a = 0), so on conditions where it is right for a share x, a learned rule can be at most
-    1 - x above that rule: the issue's "11 points above the best static threshold" needs x < 0.89."""
+    1 - x above that rule: the goal's "11 points above the best static threshold" needs x < 0.89."""
     return sum(1 for o in oracle_labels if agrees(placement, o)) / max(len(oracle_labels), 1)
 
 

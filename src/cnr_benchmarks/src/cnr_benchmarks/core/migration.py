@@ -3,7 +3,7 @@ migration_probe TSV, and the table of the results.
 
 Two measures of a hand-over, both where the output is consumed:
 
-- **consumer gap** (the issue's wording): from the last output of the old instance to the first output of the
+- **consumer gap**: from the last output of the old instance to the first output of the
   new one. It holds the module's own output period too: a stream published once a second (mfg's activity) or
   only when input arrives (local_mapcell_manager's store output, ≈ 3 Hz) shows that gap even when nothing
   moves.

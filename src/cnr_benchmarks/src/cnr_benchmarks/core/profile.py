@@ -13,7 +13,7 @@ summary compares it with the setting:
 * probe cost: bytes on the emulated link in both directions during the probe, and the caller's seconds for
   ``~profile_now`` with a probe.
 
-Targets (issue): RTT within +/-2 ms, A_bw within +/-10 %, passive within +/-20 %.
+Targets: RTT within +/-2 ms, A_bw within +/-10 %, passive within +/-20 %.
 """
 from __future__ import annotations
 

@@ -17,7 +17,7 @@ from cnr_maps.measurements import read_tsv
 from cnr_params.files import write_atomic
 
 # mode: (placement, link map): the two modes of the paper, with the dead zone cutting both directions (the
-# issue's Wi-Fi-only-at-the-ends corridor), and the paper's "normal" run as it describes it (sensor data does
+# Wi-Fi-only-at-the-ends corridor), and the paper's "normal" run as it describes it (sensor data does
 # not reach the MFG on the cloud, its commands still reach the robot: the dead zone cuts the uplink only)
 MODES = {'normal': ('paper_normal', 'link_map_corridor.yaml'),
          'network_aware': ('paper_network_aware', 'link_map_corridor.yaml'),
