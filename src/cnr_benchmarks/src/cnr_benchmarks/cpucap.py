@@ -97,7 +97,7 @@ def lateness(n: int, cgroup: Optional[str], hog: bool) -> List[float]:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    ap = cli.parser(__name__, __doc__)
+    ap = cli.Parser('bench_cpucap.sh', __doc__)
     ap.add_argument('--out', default=results.results_dir('cpucap'), help='the page\'s folder (default %(default)s)')
     ap.add_argument('--config', default=cpucap.CONFIG)
     ap.add_argument('--repeats', type=cli.positive_int, default=3)

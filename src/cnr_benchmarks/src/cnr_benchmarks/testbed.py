@@ -46,7 +46,7 @@ def iperf(tb: Testbed, seconds: float = 5.0) -> float:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    ap = cli.parser(__name__, __doc__)
+    ap = cli.Parser('bench_testbed.sh', __doc__)
     ap.add_argument('--out', default=results.results_dir('testbed'), help="the page's folder (default %(default)s)")
     args = ap.parse_args(argv)
     cli.require_root(ap.prog, 'network namespaces and TUN devices')
