@@ -19,6 +19,7 @@ Usage::
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 import threading
 from typing import List, Optional
@@ -26,6 +27,8 @@ from typing import List, Optional
 from cnr_params.config import EXIT_CONFIG   # a node's one-line configuration error
 
 EXIT_INTERRUPTED = 130
+# roslaunch's lines that say nothing to a person watching a run (the parameter summary, blank lines)
+NOISE = re.compile(r'^( \* /|\s*$|.*rosdep view is empty)')
 
 
 class _Outcome:

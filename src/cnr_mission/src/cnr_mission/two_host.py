@@ -1,6 +1,7 @@
 """The mission across two masters on the testbed: robot and cloud, each with its master, bridge and modules.
 
-``run_mission.sh --two-host`` calls this (root: network namespaces, TUN devices, cgroups)::
+``run_mission.sh --two-host`` (:mod:`cnr_mission.run`) calls :func:`run`; the same as a command (root: network
+namespaces, TUN devices, cgroups)::
 
     rosrun cnr_mission two_host_mission --scenario FILE --placement NAME|FILE --report-dir DIR
         [--delay MS --rate MBIT --loss PCT | --trace FILE | --link-map FILE] [--port P]
@@ -39,30 +40,29 @@ import argparse
 import base64
 import json
 import os
-import re
 import signal
 import subprocess
 import sys
 import time
 import uuid
+from dataclasses import dataclass
 from typing import Dict, List, Optional
 
 import yaml
 
+from cnr_bringup.launcher import EXIT_INTERRUPTED, NOISE
 from cnr_bringup.placement import Placement, launch_args, load_catalog, describe
 from cnr_harness import Proc, WaitTimeout, wait_until
 from cnr_mission.core.report import write_summary
+from cnr_mission.options import add_link_arguments, add_migration_arguments
 from cnr_params.config import EXIT_CONFIG, ConfigError, Section, load_yaml
 from cnr_testbed import cpucap
 from cnr_testbed.api import Testbed, TestbedError
 from cnr_testbed.rosside import RosSide, bridge_config
 from migration_manager.cli import parse_placement
 
-EXIT_INTERRUPTED = 130
 DECIDER = '/migration_decider'          # network_monitor's migration_decider on the robot (host.launch decider)
 EXIT_NOT_FOUND = 3
-# roslaunch's lines that say nothing to a person watching a mission (as run_mission.sh filters them)
-_NOISE = re.compile(r'^( \* /|\s*$|.*rosdep view is empty)')
 
 
 class Stop(Exception):
@@ -354,7 +354,7 @@ class TwoHostMission:
             return offset
         end = data.rfind(b'\n') + 1
         for line in data[:end].decode(errors='replace').splitlines():
-            if not _NOISE.match(line):
+            if not NOISE.match(line):
                 print(line, flush=True)
         return offset + end
 
@@ -411,7 +411,31 @@ def amend_summary(report_dir: str, extra: Dict) -> None:
     write_summary(path, summary)
 
 
-def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
+@dataclass
+class TwoHostOptions:
+    """What a two-host run is asked to do (``two_host_mission``'s options; ``run_mission.sh`` fills it in)."""
+    config_dir: str
+    scenario: str
+    map: str
+    start: List[str]
+    placement: str
+    report_dir: str
+    port: int
+    delay: Optional[float] = None
+    rate: Optional[float] = None
+    loss: Optional[float] = None
+    trace: Optional[str] = None
+    link_map: Optional[str] = None
+    migration: bool = False
+    rule: bool = False
+    network_aware: str = ''
+    task_plan: Optional[str] = None
+    task_results: Optional[str] = None
+    training_dir: str = ''
+    control_values: str = ''
+
+
+def parse_args(argv: Optional[List[str]]) -> TwoHostOptions:
     ap = argparse.ArgumentParser(prog='two_host_mission', description=__doc__.split('\n')[0])
     ap.add_argument('--config-dir', required=True, help='the workspace config/ folder')
     ap.add_argument('--scenario', required=True, help='scenario YAML')
@@ -420,28 +444,17 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
     ap.add_argument('--placement', required=True, help='a name in config/placements.yaml or a YAML file')
     ap.add_argument('--report-dir', required=True)
     ap.add_argument('--port', type=int, required=True, help='master port in both namespaces')
-    ap.add_argument('--delay', type=float, help='one-way delay per direction [ms]')
-    ap.add_argument('--rate', type=float, help='rate per direction [Mbit/s], 0 = unlimited')
-    ap.add_argument('--loss', type=float, help='loss per direction [%%]')
-    ap.add_argument('--trace', help='link trace (TSV, testbed.sh trace) played from the start')
-    ap.add_argument('--link-map', help='link-quality map by robot position (testbed.sh follow)')
-    ap.add_argument('--migration', action='store_true', help='the modules of config/migration.yaml are managed by '
-                    'migration_manager (start where --placement says, move at run time)')
-    ap.add_argument('--rule', action='store_true', help='--migration, and migration_rule moves modules by the link '
-                    'quality (config/migration.yaml rule)')
-    ap.add_argument('--network-aware', metavar='TASK', default='',
-                    help='--migration, and network_monitor\'s migration_decider places the modules of TASK '
-                         '(config/decision.yaml tasks, e.g. patrol) at the start, re-decides while the mission runs '
-                         'and evaluates it at the end')
+    add_link_arguments(ap)
+    add_migration_arguments(ap)
     task = ap.add_argument_group('task mode (exp_control.sh, exp_campaign.sh) and --network-aware')
     task.add_argument('--task-plan', help='run this plan of tasks (cnr_mission.core.task) instead of the mission')
     task.add_argument('--task-results', help='results TSV the runs are appended to (resumes after its last run)')
     task.add_argument('--training-dir', default='', help="the decider's training sets ('' = config/decision.yaml's)")
     task.add_argument('--control-values', default='', help="the tasks' control values ('' = config/decision.yaml's)")
-    return ap.parse_args(argv)
+    return TwoHostOptions(**vars(ap.parse_args(argv)))
 
 
-def task_mode(args: argparse.Namespace) -> Optional[TaskMode]:
+def task_mode(args: TwoHostOptions) -> Optional[TaskMode]:
     """The task mode of ``--task-plan`` (ConfigError for a bad plan or task)."""
     if not args.task_plan:
         return None
@@ -459,7 +472,7 @@ def task_mode(args: argparse.Namespace) -> Optional[TaskMode]:
                     os.path.abspath(args.control_values) if args.control_values else '')
 
 
-def network_aware(args: argparse.Namespace) -> str:
+def network_aware(args: TwoHostOptions) -> str:
     """The task of ``--network-aware`` after checking it against config/decision.yaml ('' = none)."""
     if not args.network_aware:
         return ''
@@ -474,7 +487,11 @@ def network_aware(args: argparse.Namespace) -> str:
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    args = parse_args(argv)
+    return run(parse_args(argv))
+
+
+def run(args: TwoHostOptions) -> int:
+    """Run the two-host mission (or task plan) ``args`` asks for; the exit status."""
     try:
         placement = load_catalog(os.path.join(args.config_dir, 'placements.yaml')).placement(args.placement)
     except ConfigError as exc:
