@@ -61,7 +61,7 @@ def test_tsv_round_trip_and_report(tmp_path):
     log.close()
     text = write_outputs(str(tmp_path / 'profile.tsv'), str(tmp_path), 'launch_scripts/bench_profile.sh --quick',
                          datetime.datetime(2026, 1, 2, 3, 4), 90.0, 'test machine')
-    assert (tmp_path / 'profile.md').read_text() == text
+    assert (tmp_path / 'README.md').read_text() == text
     assert 'Baseline RTT' in text and '**0.65 ms**' in text and '1.5 min' in text and 'test machine' in text
     assert '| 150 | 1 | 152.90 [152.80, 153.00] | +2.25 [+2.15, +2.35] | +0.40 [+0.30, +0.50] |' in text
     assert 'A_bw ±10 % in 1/3' in text and '(1 failed)' in text

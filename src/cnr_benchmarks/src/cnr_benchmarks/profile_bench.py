@@ -1,13 +1,20 @@
-"""Accuracy and cost of network_monitor's profile on the testbed (launch_scripts/bench_profile.sh; root).
+"""Accuracy and cost of network_monitor's profile on the testbed (needs root).
 
-    /usr/bin/python3 -m cnr_benchmarks.profile_bench [--quick] [--reps N] [--name bp] [--out bench_results]
+    launch_scripts/bench_profile.sh [--quick] [--reps N (default 2)] [--name bp] [--out DIR] [--config testbed.yaml]
+
+For each link RTT (0, 20, 50, 100, 150 ms, as two one-way halves) x rate (1, 3.4, 10, 50 Mbit/s both ways), after an
+unshaped 0 ms baseline: the profile's RTT vs set + baseline (target +/-2 ms), the probe's A_bw vs the rate (+/-10 %),
+the passive estimate 10 s after the probe under 0.5 x rate of background load (+/-20 %), and the probe's cost
+(bytes on the link, seconds per ~profile_now). About 15 minutes (--quick: 2 RTT x 2 rates, 1 repetition, about
+2 minutes).
 
 Brings up its own testbed instance (``--name``: namespaces NAME-robot / NAME-cloud, never the lead's ``cnr``),
 a master on each host joined by multimaster_bridge (``/network_monitor/*`` and the load topic allowed) and a
 network_monitor on each (config/network_monitor.yaml; overlays: the instance's addresses, the cloud's
 name/peer, ``probe_interval: 0`` so no periodic probe disturbs the measurements). The measuring node
 (:mod:`cnr_benchmarks.profile_worker`) runs on the robot; the first cell is the unshaped, undelayed
-baseline. Writes ``profile.tsv`` (every repetition) and ``profile.md`` (table, command, date, machine).
+baseline. Writes docs/results/profile/ (or DIR): ``profile.tsv`` (every repetition) and ``README.md`` (table,
+date, duration, load); the rows as measured go to bench_results/profile/profile.tsv.
 """
 from __future__ import annotations
 
@@ -20,7 +27,7 @@ import tempfile
 import time
 from typing import List, Tuple
 
-from cnr_benchmarks import report
+from cnr_benchmarks import cli, report, results
 
 RTTS = (0, 20, 50, 100, 150)          # ms, set as two one-way halves
 RATES = (1, 3.4, 10, 50)              # Mbit/s on both directions
@@ -125,9 +132,7 @@ def write_outputs(tsv: str, out_dir: str, command: str, started: datetime.dateti
     probe = (f"iperf3 -t {monitor['probe_seconds']} -O {monitor['probe_omit']}, at most "
              f"{monitor['probe_bytes'] / 1e6:g} MB")
     reps = max((c.reps for c in cells_), default=0)
-    md = ['# network_monitor: profile accuracy and probe cost on the testbed', '',
-          f'Command: `{command}` — {started:%Y-%m-%d %H:%M}, {wall_s / 60:.1f} min, {reps} repetition(s) per cell. '
-          f'Machine: {machine}.', '',
+    md = [f'Started {started:%Y-%m-%d %H:%M}, {wall_s / 60:.1f} min, {reps} repetition(s) per cell; {machine}.', '',
           f'Baseline RTT (0 ms set, unshaped; ROS publish/echo across the bridge plus the emulator): '
           f'**{base:.2f} ms**; RTT error = measured − (set + baseline).', '',
           'Values: mean [min, max] over the repetitions. RTT: the profile\'s median over its '
@@ -145,41 +150,38 @@ def write_outputs(tsv: str, out_dir: str, command: str, started: datetime.dateti
           'Delay error = measured − (set + the RTT measured at 0 ms and the same rate): the RTT error without the '
           'serialisation of the ping and pong segments at the rate (about 2 × 120 bytes, 1.9 ms at 1 Mbit/s), '
           'which is part of the link\'s real RTT but not of the delay set on the emulator.', '']
-    text = '\n'.join(md)
-    report.write_text(os.path.join(out_dir, 'profile.md'), text)
-    return text
+    return results.write_page(out_dir, 'Network profile accuracy and probe cost', 'thesis §4.2.4, Eq. 4-1',
+                              '\n'.join(md), command, tables={'profile.tsv': (core.Sample.columns(), [vars(s) for s in samples])})
 
 
 def machine_note() -> str:
     load = ', '.join(f'{x:.1f}' for x in os.getloadavg())
-    return f'{platform.node()}, {os.cpu_count()} cores, Linux {platform.release()}, load average {load}'
+    return f'{platform.node()}, load average {load}'
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description='network_monitor profile accuracy and probe cost on the testbed. '
-                                 + HELP_GRID)
+    ap = cli.Parser('bench_profile.sh', __doc__, epilog=HELP_GRID)
     ap.add_argument('--quick', action='store_true', help='the reduced grid, 1 repetition')
     ap.add_argument('--reps', type=int, help=f'repetitions per cell (default {REPS}, --quick 1)')
     ap.add_argument('--name', default='bp', help='testbed instance (namespaces NAME-robot, NAME-cloud)')
-    ap.add_argument('--out', default=report.DEFAULT_OUT)
+    ap.add_argument('--out', default=results.results_dir('profile'), help="the page's folder (default %(default)s)")
     ap.add_argument('--config', default=os.path.join(report.WS, 'config', 'testbed.yaml'))
     args = ap.parse_args(argv)
     reps = args.reps if args.reps is not None else (1 if args.quick else REPS)
     if reps < 1:
-        print(f'bench_profile: --reps must be >= 1, got {reps}', file=sys.stderr)
-        return 2
+        ap.error(f'--reps must be >= 1, got {reps}')
+    cli.require_root(ap.prog, "the testbed's network namespaces and TUN devices")
     grid = cells(args.quick)
-    os.makedirs(args.out, exist_ok=True)
-    tsv = os.path.join(args.out, 'profile.tsv')      # an earlier one is kept as profile.prev.tsv (TsvLog)
+    tsv = os.path.join(results.scratch_dir('profile'), 'profile.tsv')   # an earlier one kept as profile.prev.tsv
     work = tempfile.mkdtemp(prefix='bench_profile-')
     started, t0 = datetime.datetime.now(), time.monotonic()
     machine = machine_note()
     report.progress(f'bench_profile: {len(grid)} cells x {reps} repetition(s); node logs in {work}')
     measure(args, grid, reps, tsv, work)
     wall = time.monotonic() - t0
-    command = 'launch_scripts/bench_profile.sh' + ''.join(f' {a}' for a in (argv if argv is not None else sys.argv[1:]))
-    print(write_outputs(tsv, args.out, command, started, wall, machine))
-    print(f'wrote {tsv} and {os.path.join(args.out, "profile.md")} in {wall / 60:.1f} min')
+    print(write_outputs(tsv, args.out, cli.command(ap, argv), started, wall, machine))
+    print(f'wrote {os.path.join(args.out, "README.md")} and profile.tsv in {wall / 60:.1f} min (rows as measured in '
+          f'{tsv})')
     return 0
 
 

@@ -1,4 +1,5 @@
-"""Writing benchmark results: TSV rows (appended as they are measured, never truncated), markdown, PNG."""
+"""Running a benchmark: TSV rows logged as they are measured, markdown tables, interrupts, child processes, and
+the testbed benchmarks' common arguments and set-up (the results page: :mod:`cnr_benchmarks.results`)."""
 from __future__ import annotations
 
 import argparse
@@ -9,8 +10,7 @@ import sys
 import tempfile
 from typing import Dict, Iterable, List, Sequence
 
-WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
-DEFAULT_OUT = os.path.join(WS, 'bench_results')
+from cnr_benchmarks.results import WS, results_dir, scratch_dir
 
 
 class TsvLog:
@@ -55,13 +55,6 @@ def _cell(c) -> str:
     return str(c)
 
 
-def write_text(path: str, text: str) -> None:
-    tmp = f'{path}.tmp{os.getpid()}'
-    with open(tmp, 'w') as f:
-        f.write(text)
-    os.replace(tmp, path)
-
-
 def stop_on_signals() -> None:
     """SIGTERM, and SIGINT even where the shell that started a background job ignored it, raise
     KeyboardInterrupt: a long run writes what it measured and stops its testbed (for a command's ``__main__``)."""
@@ -99,10 +92,10 @@ def group(rows: List[Dict], *keys: str) -> Dict[tuple, List[Dict]]:
     return out
 
 
-def add_common_arguments(ap: argparse.ArgumentParser, default_rtts: str) -> None:
-    """--rtts, --out and --config of the testbed benchmarks."""
+def add_common_arguments(ap: argparse.ArgumentParser, default_rtts: str, experiment: str) -> None:
+    """--rtts, --out (default docs/results/<experiment>) and --config of the testbed benchmarks."""
     ap.add_argument('--rtts', default=default_rtts, help='link RTTs in ms (comma-separated)')
-    ap.add_argument('--out', default=DEFAULT_OUT)
+    ap.add_argument('--out', default=results_dir(experiment), help="the page's folder (default %(default)s)")
     ap.add_argument('--config', default=os.path.join(WS, 'config', 'testbed.yaml'))
 
 
@@ -119,16 +112,17 @@ def parse_rtts(prog: str, text: str) -> List[float]:
 
 
 class BenchRun:
-    """A benchmark on the testbed: parsed RTTs, the TSV log, a work directory with a fresh bridge secret, and
-    the testbed (instance ``cnrbench``) brought up on entry and down on exit, however the run ends."""
+    """A benchmark on the testbed: parsed RTTs, the TSV log of the rows as measured (in
+    ``bench_results/<experiment>/``), a work directory with a fresh bridge secret, and the testbed (instance
+    ``cnrbench``) brought up on entry and down on exit, however the run ends."""
 
-    def __init__(self, prog: str, args: argparse.Namespace, tsv_name: str, columns: Sequence[str]) -> None:
+    def __init__(self, prog: str, args: argparse.Namespace, experiment: str, tsv_name: str,
+                 columns: Sequence[str]) -> None:
         self.rtts = parse_rtts(prog, args.rtts)
         from cnr_testbed.api import Testbed
         self.testbed = Testbed(args.config, {'name': 'cnrbench', 'robot.namespace': 'cnrbench-robot',
                                              'cloud.namespace': 'cnrbench-cloud'})
-        os.makedirs(args.out, exist_ok=True)
-        self.log = TsvLog(os.path.join(args.out, tsv_name), columns)
+        self.log = TsvLog(os.path.join(scratch_dir(experiment), tsv_name), columns)
         self.work = tempfile.mkdtemp(prefix=f'{prog}-')
         self.secret = os.path.join(self.work, 'secret')
         with open(self.secret, 'w') as f:

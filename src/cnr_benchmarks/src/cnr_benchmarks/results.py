@@ -21,7 +21,7 @@ import platform
 import shlex
 import subprocess
 from dataclasses import dataclass
-from typing import Any, Optional, Sequence
+from typing import Any, Mapping, Optional, Sequence, Tuple
 
 from cnr_params.files import write_atomic, write_json
 
@@ -95,9 +95,18 @@ def header(title: str, reference: str, prov: Provenance) -> str:
             f'| {prov.measured} | {prov.commit} | {prov.machine} | `{prov.command}` |\n')
 
 
-def write_page(out_dir: str, title: str, reference: str, body: str, command: str, ws: str = WS) -> str:
-    """``<out_dir>/README.md``: :func:`header` and ``body``, replacing the page of an earlier run; returns the page."""
+def write_page(out_dir: str, title: str, reference: str, body: str, command: str,
+               figures: Optional[Mapping[str, Any]] = None,
+               tables: Optional[Mapping[str, Tuple[Sequence[str], Sequence[Any]]]] = None, ws: str = WS) -> str:
+    """``<out_dir>/README.md``: :func:`header` and ``body``, replacing the page of an earlier run; beside it
+    ``figures`` (file name -> matplotlib figure, :func:`write_figure`) and ``tables`` (file name -> (columns,
+    rows), each row a sequence or a dict by column, :func:`write_tsv`). Returns the page."""
     os.makedirs(out_dir, exist_ok=True)
+    for name, fig in (figures or {}).items():
+        write_figure(fig, os.path.join(out_dir, name))
+    for name, (columns, rows) in (tables or {}).items():
+        write_tsv(os.path.join(out_dir, name), columns,
+                  [[r.get(c) for c in columns] if isinstance(r, Mapping) else r for r in rows])
     text = header(title, reference, provenance(command, ws)) + '\n' + body.rstrip('\n') + '\n'
     write_atomic(os.path.join(out_dir, PAGE), text)
     return text

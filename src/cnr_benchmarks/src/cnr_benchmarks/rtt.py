@@ -1,6 +1,10 @@
 """Table 4-1 / Appendix II: RTT between a client node and a monitor node, by placement and link delay.
 
-    launch_scripts/bench_rtt.sh [--rtts 0,20,50,100] [--samples 20] [--placements M-M,C-Ma,C-Mo,Multi]
+    launch_scripts/bench_rtt.sh [--rtts 0,20,50,100] [--samples 20] [--interval 0.25]
+                                [--placements M-M,C-Ma,C-Mo,Multi] [--out DIR]
+
+Round trip between a client node (robot) and a monitor node through topics (echo) and services (naive and
+persistent clients) at link RTTs 0, 20, 50, 100 ms, 20 samples each, on the testbed. Needs root; about 10 minutes.
 
 The client always runs on the robot. Placements (thesis Figure 4-14):
 
@@ -10,21 +14,21 @@ The client always runs on the robot. Placements (thesis Figure 4-14):
 * ``Multi`` a master on each host joined by multimaster_bridge, monitor on the cloud.
 
 Per placement, link RTT (set on the testbed as two one-way halves) and mode (topic echo, naive service
-client, persistent service client) the client takes ``--samples`` probes. Writes ``rtt.tsv`` (every sample),
-``rtt.md`` (mean, std.dev, std.err, median as the thesis gives them, thesis figures beside ours) and
-``rtt.png``.
+client, persistent service client) the client takes ``--samples`` probes. Writes docs/results/rtt/ (or DIR): ``rtt.tsv`` (every sample),
+``README.md`` (mean, std.dev, std.err, median as the thesis gives them, thesis figures beside ours) and ``rtt.png``;
+the rows as measured go to bench_results/rtt/rtt.tsv.
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 from typing import Dict, List
 
-from cnr_benchmarks import report
+from cnr_benchmarks import cli, report, results
 from cnr_params import load_yaml
 from cnr_benchmarks.core.stats import summarize
 
+COLUMNS = ['placement', 'link_rtt_ms', 'mode', 'sample', 'rtt_ms']
 PLACEMENTS = {   # name: (masters, client's master, monitor host, monitor's master)
     'M-M': (('cloud',), 'cloud', 'cloud', 'cloud'),
     'C-Ma': (('robot',), 'robot', 'cloud', 'robot'),
@@ -96,14 +100,14 @@ def run_placement(tb, name: str, rtts: List[float], samples: int, interval: floa
     return rows
 
 
-def write_outputs(rows: List[Dict], rtts: List[float], out_dir: str) -> str:
+def write_outputs(rows: List[Dict], rtts: List[float], out_dir: str, command: str) -> str:
+    """rtt.tsv, rtt.png and the page README.md in ``out_dir``; returns the page."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
     groups = report.group(rows, 'placement', 'link_rtt_ms', 'mode')
     placements = [p for p in PLACEMENTS if any(k[0] == p for k in groups)]
-    md = ['# RTT between client and monitor (thesis Table 4-1, Appendix II)', '',
-          'Measured with `launch_scripts/bench_rtt.sh` on the testbed (robot and cloud namespaces, user-space '
+    md = ['Measured with `launch_scripts/bench_rtt.sh` on the testbed (robot and cloud namespaces, user-space '
           'link emulator; the link RTT is set as two equal one-way delays). The thesis set a 50 ms `tc` delay on '
           'one interface, i.e. about 50 ms added RTT; its columns are shown beside our 50 ms ones. '
           'Values in ms; "ours" = mean ± std.dev (std.err) [median].', '']
@@ -159,17 +163,14 @@ def write_outputs(rows: List[Dict], rtts: List[float], out_dir: str) -> str:
         ax.grid(alpha=0.3)
     axes[0].legend()
     fig.tight_layout()
-    png = os.path.join(out_dir, 'rtt.png')
-    fig.savefig(png, dpi=110)
     md += ['![RTT by placement](rtt.png)', '']
-    text = '\n'.join(md)
-    report.write_text(os.path.join(out_dir, 'rtt.md'), text)
-    return text
+    return results.write_page(out_dir, 'RTT between client and monitor', 'thesis Table 4-1, Appendix II',
+                              '\n'.join(md), command, {'rtt.png': fig}, {'rtt.tsv': (COLUMNS, rows)})
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description='Thesis Table 4-1: topic and service RTT by node placement and delay.')
-    report.add_common_arguments(ap, '0,20,50,100')
+    ap = cli.Parser('bench_rtt.sh', __doc__)
+    report.add_common_arguments(ap, '0,20,50,100', 'rtt')
     ap.add_argument('--samples', type=int, default=20)
     ap.add_argument('--interval', type=float, default=0.25, help='seconds between probes')
     ap.add_argument('--placements', default=','.join(PLACEMENTS))
@@ -177,17 +178,17 @@ def main(argv=None) -> int:
     placements = args.placements.split(',')
     bad = [p for p in placements if p not in PLACEMENTS]
     if bad or args.samples < 2:
-        print(f'bench_rtt: bad arguments: unknown placements {bad} or --samples {args.samples} < 2', file=sys.stderr)
-        return 2
+        ap.error(f'unknown placements {bad} or --samples {args.samples} < 2')
+    cli.require_root(ap.prog, "the testbed's network namespaces and TUN devices")
     rows: List[Dict] = []
-    with report.BenchRun('bench_rtt', args, 'rtt.tsv',
-                         ['placement', 'link_rtt_ms', 'mode', 'sample', 'rtt_ms']) as run:
+    with report.BenchRun('bench_rtt', args, 'rtt', 'rtt.tsv', COLUMNS) as run:
         for p in placements:
             report.progress(f'placement {p}')
             rows += run_placement(run.testbed, p, run.rtts, args.samples, args.interval, run.log, run.work,
                                   run.secret)
-    print(write_outputs(rows, run.rtts, args.out))
-    print(f'wrote {run.log.path}, {args.out}/rtt.md, {args.out}/rtt.png (node logs in {run.work})')
+    print(write_outputs(rows, run.rtts, args.out, cli.command(ap, argv)))
+    print(f'wrote {args.out}/README.md, rtt.tsv, rtt.png (rows as measured in {run.log.path}, node logs in '
+          f'{run.work})')
     return 0
 
 

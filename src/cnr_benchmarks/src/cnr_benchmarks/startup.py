@@ -1,6 +1,10 @@
 """Table 4-2 / Appendix III: start-up time of the navigation node on the cloud host, single vs multi master.
 
-    launch_scripts/bench_startup.sh [--rtts 0,20,50,100,120,140] [--runs 5] [--modes SM,MM]
+    launch_scripts/bench_startup.sh [--rtts 0,20,50,100,120,140] [--runs 5] [--modes SM,MM] [--out DIR]
+
+Start-up time of the navigation node (move_base) on the cloud host, from process start until its action server is
+usable from the robot's master, with a single master (the robot's) versus one master per host joined by
+multimaster_bridge, 5 runs per link RTT. Needs root. The single-master runs dominate: about 30 minutes in all.
 
 The simulated TurtleBot (simulator + map_server) runs on the robot's master. move_base (cnr_navigation) is
 started on the cloud host:
@@ -12,12 +16,12 @@ started on the cloud host:
 
 Start-up = process start until move_base's action server (its five action topics) is registered on the
 **robot's** master, i.e. usable by the robot; for MM this includes the bridge's sync. The parameters are put
-on the master move_base uses before each run (as roslaunch would, not timed). Writes ``startup.tsv`` (every
-run), ``startup.md`` (thesis beside ours) and ``startup.png``.
+on the master move_base uses before each run (as roslaunch would, not timed). Writes docs/results/startup/ (or
+DIR): ``startup.tsv`` (every run), ``README.md`` (thesis beside ours) and ``startup.png``; the rows as measured go
+to bench_results/startup/startup.tsv.
 """
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import time
@@ -26,10 +30,11 @@ from typing import Dict, List
 
 import yaml
 
-from cnr_benchmarks import report
+from cnr_benchmarks import cli, report, results
 from cnr_benchmarks.core.stats import summarize
 from cnr_harness import wait_until
 
+COLUMNS = ['mode', 'link_rtt_ms', 'run', 'startup_ms']
 # thesis Appendix III, averages in ms (5 runs each); std.dev where Table 4-2 gives it
 THESIS_SM = {0: 13414.0, 20: 45332.0, 50: 95688.0, 100: 174452.0, 120: 200556.0, 140: 230206.0}
 THESIS_MM = {0: 5350.0, 20: 5422.0, 50: 5350.0, 100: 5634.0, 120: 5986.0, 140: 6112.0}
@@ -150,13 +155,13 @@ class Setup:
                 side.stop()
 
 
-def write_outputs(rows: List[Dict], rtts: List[float], out_dir: str) -> str:
+def write_outputs(rows: List[Dict], rtts: List[float], out_dir: str, command: str) -> str:
+    """startup.tsv, startup.png and the page README.md in ``out_dir``; returns the page."""
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
     groups = report.group(rows, 'mode', 'link_rtt_ms')
-    md = ['# Start-up time of move_base on the cloud host (thesis Table 4-2, Appendix III)', '',
-          'Measured with `launch_scripts/bench_startup.sh`: process start until the `move_base` action server is '
+    md = ['Measured with `launch_scripts/bench_startup.sh`: process start until the `move_base` action server is '
           'registered on the robot\'s master. Mean ± std.dev (std.err) over the runs, in ms; the thesis\'s '
           'averages (5 runs, TurtleBot laptop + cloud VM, `tc` delay) beside ours.', '']
     header = ['link RTT (ms)', 'SM ours', 'SM thesis', 'MM ours', 'MM thesis']
@@ -206,27 +211,25 @@ def write_outputs(rows: List[Dict], rtts: List[float], out_dir: str) -> str:
     ax.grid(alpha=0.3, which='both')
     ax.legend()
     fig.tight_layout()
-    fig.savefig(os.path.join(out_dir, 'startup.png'), dpi=110)
     md += ['![start-up time](startup.png)', '']
-    text = '\n'.join(md)
-    report.write_text(os.path.join(out_dir, 'startup.md'), text)
-    return text
+    return results.write_page(out_dir, 'move_base start-up on the cloud, single vs multi-master',
+                              'thesis Table 4-2, Appendix III', '\n'.join(md), command, {'startup.png': fig},
+                              {'startup.tsv': (COLUMNS, rows)})
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description='Thesis Table 4-2: move_base start-up on the cloud, SM vs MM.')
-    report.add_common_arguments(ap, '0,20,50,100,120,140')
+    ap = cli.Parser('bench_startup.sh', __doc__)
+    report.add_common_arguments(ap, '0,20,50,100,120,140', 'startup')
     ap.add_argument('--runs', type=int, default=5)
     ap.add_argument('--modes', default='SM,MM')
     ap.add_argument('--timeout', type=float, default=900.0, help='seconds per run before giving up')
     args = ap.parse_args(argv)
     modes = args.modes.split(',')
     if any(m not in ('SM', 'MM') for m in modes) or args.runs < 1:
-        print(f'bench_startup: bad arguments: --modes {args.modes} (SM, MM) or --runs {args.runs} < 1',
-              file=sys.stderr)
-        return 2
+        ap.error(f'--modes {args.modes} (SM, MM) or --runs {args.runs} < 1')
+    cli.require_root(ap.prog, "the testbed's network namespaces and TUN devices")
     rows: List[Dict] = []
-    with report.BenchRun('bench_startup', args, 'startup.tsv', ['mode', 'link_rtt_ms', 'run', 'startup_ms']) as bench:
+    with report.BenchRun('bench_startup', args, 'startup', 'startup.tsv', COLUMNS) as bench:
         tb = bench.testbed
         for mode in modes:
             report.progress(f'{mode}: bringing up masters, simulator' + (' and bridges' if mode == 'MM' else ''))
@@ -246,8 +249,9 @@ def main(argv=None) -> int:
                         report.progress(f'  {mode} {r:5.0f} ms run {run}/{args.runs}: {t:9.0f} ms')
             finally:
                 setup.stop()
-    print(write_outputs(rows, bench.rtts, args.out))
-    print(f'wrote {bench.log.path}, {args.out}/startup.md, {args.out}/startup.png (node logs in {bench.work})')
+    print(write_outputs(rows, bench.rtts, args.out, cli.command(ap, argv)))
+    print(f'wrote {args.out}/README.md, startup.tsv, startup.png (rows as measured in {bench.log.path}, node logs '
+          f'in {bench.work})')
     return 0
 
 
