@@ -4,19 +4,32 @@
     rosrun cnr_navigation goal_sequencer --goal 5.0 0.5 0.0
 
 Exit status: 0 when every goal was reached, 1 otherwise, 2 for a bad goal file.
+
+``launch_scripts/send_goals.sh`` (:func:`send_goals`, this module's ``__main__``) runs it on a master of one's
+choice.
 """
 from __future__ import annotations
 
 import argparse
 import math
+import os
 import sys
 import time
 from dataclasses import dataclass
-from typing import List
+from typing import List, Optional
 
 import cnr_params
+from cnr_bringup.script import WS, Parser, Processes, ScriptError, master_address, master_up, port_number, run
 from cnr_params import ConfigError, Section
 from cnr_runtime import init_node
+
+SEND_GOALS = 'send_goals.sh'
+SEND_GOALS_DOC = """Send navigation goals to move_base through its action interface, printing progress.
+
+FILE holds `goals: [{name: .., x: .., y: .., yaw: ..}, ...]` (all required) in the map frame (default
+config/goals_corridor.yaml); or one goal X Y YAW. Needs a master with move_base (launch_scripts/bringup.sh).
+Exit status: 0 when every goal succeeded, 1 otherwise, 2 for a bad option or goal file, 130 interrupted.
+"""
 
 
 @dataclass
@@ -123,3 +136,30 @@ def main() -> None:
             print(f'[{i}/{len(goals)}] {g.name}: FAILED ({name}: {text or "timeout"})', flush=True)
     print(f'goal_sequencer: {reached}/{len(goals)} goals reached', flush=True)
     sys.exit(0 if reached == len(goals) else 1)
+
+
+def _send_goals(argv: Optional[List[str]]) -> int:
+    ap = Parser(SEND_GOALS, SEND_GOALS_DOC)
+    ap.add_argument('--host', help='master host (default: ROS_MASTER_URI, else localhost)')
+    ap.add_argument('--port', type=port_number, help='master port (default: ROS_MASTER_URI, else 11311)')
+    ap.add_argument('--goals', type=os.path.realpath, metavar='FILE',
+                    default=os.path.join(WS, 'config', 'goals_corridor.yaml'), help='YAML goal file')
+    ap.add_argument('goal', nargs='*', metavar='X Y YAW', help='one goal in the map frame instead of a file')
+    args = ap.parse_args(argv)
+    if len(args.goal) not in (0, 3):
+        ap.error('expected X Y YAW or --goals FILE')
+    master_address(args.host, args.port)
+    if not master_up():
+        raise ScriptError(f'no master at {os.environ["ROS_MASTER_URI"]} (start one with launch_scripts/bringup.sh)')
+    goals = ['--goal', *args.goal] if args.goal else ['--goals', args.goals]
+    with Processes() as procs:
+        return procs.start(['rosrun', 'cnr_navigation', 'goal_sequencer', *goals]).wait()
+
+
+def send_goals(argv: Optional[List[str]] = None) -> int:
+    """``send_goals.sh [--host H] [--port P] [--goals FILE | X Y YAW]``: the goal sequencer on a running master."""
+    return run(lambda: _send_goals(argv), SEND_GOALS)
+
+
+if __name__ == '__main__':
+    sys.exit(send_goals())
