@@ -4,8 +4,8 @@
 
 A master on a free port holds a graph like the robot's (``--nodes`` nodes, each publishing ``--topics-per-node``
 topics with a subscriber and one service); the bridge's :class:`multimaster_bridge.node.MasterClient` polls it
-at ``--rate`` Hz (a full refresh once a second, as the bridge does), as it is and as it was before
-(:class:`AsBefore`, :class:`ParsedEachPoll`), twice each in turn. Prints ms of CPU per poll and the CPU
+at ``--rate`` Hz (a full refresh once a second, as the bridge does), as it is and as two simpler clients
+(:class:`AsBefore`, :class:`ParsedEachPoll`, the baselines), twice each in turn. Prints ms of CPU per poll and the CPU
 share at the rate.
 """
 from __future__ import annotations
@@ -24,8 +24,8 @@ from multimaster_bridge.node import MasterClient
 
 
 class AsBefore(MasterClient):
-    """The bridge's client as it was until 2026-11-25: a new connection (and a new master thread) for every
-    call, getSystemState and getTopicTypes on every poll."""
+    """Baseline: a new connection (and a new master thread) for every call, getSystemState and getTopicTypes on
+    every poll."""
 
     def _proxy(self) -> xmlrpc.client.ServerProxy:
         return xmlrpc.client.ServerProxy(self.uri)
@@ -39,8 +39,8 @@ class AsBefore(MasterClient):
 
 
 class ParsedEachPoll(MasterClient):
-    """The bridge's client as it was until 2026-11-26: kept-alive connection, but every answer gzip-compressed
-    by the master and parsed by the bridge, even when it is the same as the last one."""
+    """Baseline: a kept-alive connection, but every answer gzip-compressed by the master and parsed by the
+    bridge, even when it is the same as the last one."""
 
     def _proxy(self) -> xmlrpc.client.ServerProxy:
         if self._server is None:

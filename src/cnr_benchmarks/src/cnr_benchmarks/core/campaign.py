@@ -166,7 +166,7 @@ def pairs(rows: Sequence[Dict[str, str]], k: int = 5) -> List[Pair]:
     out = []
     for c, runs in by.items():
         # a run whose placement was not made (placed 0: a migration rolled back) did not measure its placement
-        # (rows from before 2026-11-26 still carry the decided placement as their decision)
+        # (a row without the `placed` field counts as placed)
         placed = {r['decision']: r for r in runs if r['decision'] in (OFFLOAD, ONLOAD) and r.get('placed') != '0'}
         if set(placed) != {OFFLOAD, ONLOAD}:
             continue
