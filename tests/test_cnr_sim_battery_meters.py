@@ -6,6 +6,7 @@ import pytest
 from cnr_params import ConfigError, Section
 from cnr_sim.core.battery import BatteryConfig, BatteryModel, CgroupCpuMeter, CpuMeter, NetMeter, cpu_meter
 from cnr_sim.params import config_section, read_params
+from cnr_testbed.cpucap import UsageReader
 
 SIM = config_section(os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'config'))
 LAUNCH = dict(map_file='corridor.yaml', real_time_factor=1.0, initial_pose=[0.5, 0.0, 0.0])
@@ -25,9 +26,7 @@ class FakeReader:
 
 
 def meter(readings):
-    m = CgroupCpuMeter('cnr_robot_test')
-    m._reader = FakeReader(readings)
-    return m
+    return CgroupCpuMeter(FakeReader(readings))
 
 
 def test_cgroup_meter_charges_usage_deltas():
@@ -47,10 +46,10 @@ def test_cgroup_meter_group_appearing_late_or_recreated():
 
 
 def test_meter_choice_follows_the_parameter():
-    assert isinstance(cpu_meter(''), CpuMeter) and cpu_meter('').needs_pids
-    assert isinstance(cpu_meter('cnr_robot_cnr'), CgroupCpuMeter)
+    assert isinstance(cpu_meter('', UsageReader), CpuMeter) and cpu_meter('', UsageReader).needs_pids
+    assert isinstance(cpu_meter('cnr_robot_cnr', UsageReader), CgroupCpuMeter)
     with pytest.raises(ValueError):
-        cpu_meter('../escape')
+        cpu_meter('../escape', UsageReader)
 
 
 def test_model_totals_of_charged_work():

@@ -1,6 +1,6 @@
-"""The simulator's fence without ROS (cnr_sim.core.fence): velocity commands of a managed move_base instance are
+"""The simulator's fence without ROS (migration_manager.core.fence): velocity commands of a managed move_base instance are
 obeyed only while it holds the lease; commands without the instance header are obeyed as before."""
-from cnr_sim.core.fence import INSTANCE_HEADER, CommandFence
+from migration_manager.core.fence import INSTANCE_HEADER, CommandFence
 from migration_manager.core.lease import Answer, Grantor
 
 ROBOT = {INSTANCE_HEADER: 'move_base@robot'}

@@ -1,9 +1,9 @@
 """The ``simulator`` node: ROS I/O around :class:`cnr_sim.core.world.World` (a stage_ros look-alike).
 
 Publishes /clock, odom, base_pose_ground_truth, scan, camera/depth/points, battery_state, obstacles,
-collision events and tf; subscribes mobile_base/commands/velocity (fenced: a managed move_base instance
-that does not hold the lease is ignored, see :mod:`cnr_sim.core.fence`); services reset_positions and teleport.
-Every topic, service and parameter is documented in the package README.
+collision events and tf; subscribes mobile_base/commands/velocity (through the ``~command_fence`` plugin, if
+any: e.g. a managed move_base instance that does not hold the lease is ignored); services reset_positions and
+teleport. Every topic, service and parameter is documented in the package README.
 """
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ import math
 import socket
 import threading
 import time
-from typing import Optional, Set
+from typing import Callable, Optional, Set
 from urllib.parse import urlparse
 from xmlrpc.client import ServerProxy
 
@@ -27,18 +27,16 @@ from std_srvs.srv import Empty, EmptyResponse
 import cnr_params
 from cnr_maps.mapio import load_map
 from cnr_maps.pose import Pose2D, yaw_to_quaternion
-from cnr_msgs.msg import BatteryEnergy, Collision, MigrationLease
+from cnr_msgs.msg import BatteryEnergy, Collision
 from cnr_msgs.srv import Teleport, TeleportResponse
 from cnr_params.ros import private_section
 from cnr_runtime import init_node
 from cnr_sim.core.battery import BatteryModel, NetMeter, cpu_meter
 from cnr_sim.core.depth_camera import POINT_STEP
-from cnr_sim.core.fence import CommandFence
+from cnr_sim.core import plugins
+from cnr_sim.core.plugins import CommandGate, CpuUsage
 from cnr_sim.core.world import World
 from cnr_sim.params import SimulatorParams, read_params
-from migration_manager.core.lease import Answer
-
-FENCED_MODULE = 'move_base'     # the managed module that commands the base (migration_manager)
 
 
 def yaw_quaternion(yaw: float) -> Quaternion:
@@ -110,7 +108,16 @@ class RobotProcesses:
 
 
 class SimulatorNode:
-    def __init__(self, params: SimulatorParams) -> None:
+    """The simulator.
+
+    Args:
+        params: its parameters.
+        fence: decides whose velocity commands move the base (None: everyone's).
+        cpu_usage: reads a cgroup's CPU seconds (called with ``~battery/cpu_cgroup`` if one is named).
+    """
+
+    def __init__(self, params: SimulatorParams, fence: Optional[CommandGate] = None,
+                 cpu_usage: Optional[Callable[[str], CpuUsage]] = None) -> None:
         self.p = params
         grid = load_map(params.map_file)
         self.grid = grid
@@ -138,33 +145,23 @@ class SimulatorNode:
         self.obstacles_pub = rospy.Publisher('obstacles', PoseArray, queue_size=2)
         self.tf = tf2_ros.TransformBroadcaster()
         self.static_tf = tf2_ros.StaticTransformBroadcaster()
-        self.fence = CommandFence(FENCED_MODULE)
-        rospy.Subscriber(f'/migration/{FENCED_MODULE}/lease', MigrationLease, self._on_lease, queue_size=20)
+        self.fence = fence
         rospy.Subscriber('mobile_base/commands/velocity', Twist, self._on_cmd, queue_size=5)
         rospy.Service('reset_positions', Empty, self._on_reset)
         rospy.Service('teleport', Teleport, self._on_teleport)
         self._scan_msg = self._scan_template()
         self._cloud_msg = self._cloud_template()
         self._procs = RobotProcesses(ns)
-        self._cpu = cpu_meter(params.battery_cpu_cgroup) if params.battery_enabled else None
+        self._cpu = cpu_meter(params.battery_cpu_cgroup, cpu_usage) if params.battery_enabled else None
         self._net = NetMeter(params.battery_interface) if params.battery_enabled else None
         self._next_battery = 0.0
         self.rtf_achieved = 0.0
 
     # -- callbacks -----------------------------------------------------------------------------
-    def _on_lease(self, msg: MigrationLease) -> None:
-        with self.lock:
-            self.fence.on_lease(Answer(msg.module, msg.term, msg.holder, msg.nonce, msg.granted, msg.duration))
-
     def _on_cmd(self, msg: Twist) -> None:
         header = getattr(msg, '_connection_header', None)
-        with self.lock:
-            accepted = self.fence.accept(header)
-            holder = self.fence.holder()
-        if not accepted:
-            rospy.logwarn_throttle(5.0, f'ignored velocity commands from {CommandFence.instance_of(header)}: '
-                                        f'{FENCED_MODULE} is held by {holder or "no instance"} '
-                                        f'({self.fence.dropped} dropped so far)')
+        if self.fence is not None and not self.fence.accept(header):
+            rospy.logwarn_throttle(5.0, self.fence.refusal(header))
             return
         v, w = msg.linear.x, msg.angular.z
         if not (math.isfinite(v) and math.isfinite(w)):
@@ -369,6 +366,22 @@ def _point(x: float, y: float):
 @cnr_params.exit_on_config_error
 def main() -> None:
     init_node('simulator')
-    params = read_params(private_section('~'))
-    node = SimulatorNode(params)
+    section = private_section('~')
+    params = read_params(section)
+    fence = _plugin(section, 'command_fence', params.command_fence)
+    cpu_usage = None
+    if params.battery_enabled and params.battery_cpu_cgroup:
+        cpu_usage = _plugin(section.section('battery'), 'cpu_usage', params.battery_cpu_usage)
+    node = SimulatorNode(params, fence() if fence is not None else None, cpu_usage)
     node.run()
+
+
+def _plugin(section, key: str, spec: str) -> Optional[Callable]:
+    """The factory a plugin parameter names (None for ''); a config error naming the parameter if it cannot be
+    loaded."""
+    if not spec:
+        return None
+    try:
+        return plugins.load(spec)
+    except ValueError as exc:
+        raise section.error(key, str(exc))

@@ -14,6 +14,7 @@ from cnr_maps.pose import Pose2D
 from cnr_sim.core.kinematics import BaseLimits
 from cnr_sim.core.laser import LaserConfig
 from cnr_sim.core.obstacles import MovingObstacle, obstacles_from_config
+from cnr_sim.core.plugins import check_spec
 from cnr_sim.core.world import WorldConfig
 
 
@@ -39,6 +40,7 @@ class SimulatorParams:
     battery_rate: float
     battery_interface: str
     battery_cpu_cgroup: str
+    battery_cpu_usage: str          # plugin reading the cgroup's CPU seconds (cnr_sim.core.plugins)
     battery_measure_period: float
     battery_enabled: bool
     obstacles: List[MovingObstacle]
@@ -49,6 +51,7 @@ class SimulatorParams:
     base_height: float
     publish_map_to_odom: bool
     seed: int
+    command_fence: str              # plugin fencing the velocity commands ('' none; cnr_sim.core.plugins)
 
 
 def config_section(config_dir: str, **values: Any) -> Section:
@@ -115,6 +118,16 @@ def read_depth_camera(p: Section) -> DepthCameraConfig:
     return depth
 
 
+def read_plugin(p: Section, key: str, optional: bool = False) -> str:
+    """A plugin name (``package.module:name``; '' if ``optional``), checked for its form only: it is loaded when
+    the node starts (:func:`cnr_sim.core.plugins.load`)."""
+    spec = p.string(key)
+    problem = check_spec(spec) if spec or not optional else ''
+    if problem:
+        raise p.error(key, problem)
+    return spec
+
+
 def read_params(p: Section) -> SimulatorParams:
     """Build :class:`SimulatorParams` from the node's private namespace (errors name the field)."""
     base, odom, ls, bat = p.section('base'), p.section('odom'), p.section('laser'), p.section('battery')
@@ -134,6 +147,7 @@ def read_params(p: Section) -> SimulatorParams:
         battery_rate=bat.number('publish_rate', positive=True),
         battery_interface=bat.string('interface'),
         battery_cpu_cgroup=bat.string('cpu_cgroup'),
+        battery_cpu_usage=read_plugin(bat, 'cpu_usage'),
         battery_measure_period=bat.number('measure_period', positive=True),
         battery_enabled=bat.boolean('measure_work'),
         obstacles=obstacles_from_config(p) if p.boolean('enable_obstacles') else [],
@@ -142,4 +156,5 @@ def read_params(p: Section) -> SimulatorParams:
         base_frame=p.string('base_frame'),
         base_height=base.number('height'),
         publish_map_to_odom=p.boolean('publish_map_to_odom'),
-        seed=p.integer('seed'))
+        seed=p.integer('seed'),
+        command_fence=read_plugin(p, 'command_fence', optional=True))

@@ -49,10 +49,8 @@ from std_srvs.srv import Empty
 from migration_manager.codes import ROLE
 from migration_manager.core import state as state_codec
 from migration_manager.core.config import MigrationConfig, from_section
-from migration_manager.core.lease import Answer, Holder, host_of, instance_id
+from migration_manager.core.lease import INSTANCE_HEADER, Answer, Holder, host_of, instance_id
 from migration_manager.core.priority import Elevator
-
-INSTANCE_HEADER = 'cnr_instance'       # connection header of a managed instance's output publishers
 
 
 class Hooks:

@@ -21,9 +21,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Dict, Iterable, Optional, Set, Union
+from typing import Callable, Dict, Iterable, Optional, Set, Union
 
 from cnr_params import Section
+
+from cnr_sim.core.plugins import CpuUsage
 
 GRAVITY = 9.81  # m/s^2
 
@@ -205,8 +207,8 @@ class CpuMeter:
 
 
 class CgroupCpuMeter:
-    """CPU seconds used by the processes of a cgroup (:mod:`cnr_testbed.cpucap`): exactly the robot's computer,
-    exited processes included.
+    """CPU seconds used by the processes of a cgroup, read by ``reader`` (the ``~battery/cpu_usage`` plugin's,
+    e.g. the testbed's CPU cap): exactly the robot's computer, exited processes included.
 
     A group that appears after the meter started is charged from its creation; one that is re-created (its
     usage restarts) from the new start. ``problem`` says why the last sample could not be read ('' if it was).
@@ -214,9 +216,8 @@ class CgroupCpuMeter:
 
     needs_pids = False
 
-    def __init__(self, name: str) -> None:
-        from cnr_testbed.cpucap import UsageReader
-        self._reader = UsageReader(name)
+    def __init__(self, reader: CpuUsage) -> None:
+        self._reader = reader
         self._last: Optional[float] = None
         self._missed_first = False
 
@@ -236,9 +237,10 @@ class CgroupCpuMeter:
         return used - prev if used >= prev else used
 
 
-def cpu_meter(cgroup: str) -> Union[CpuMeter, CgroupCpuMeter]:
-    """The CPU meter for ``~battery/cpu_cgroup``: the cgroup's, or ('') one over the robot's processes."""
-    return CgroupCpuMeter(cgroup) if cgroup else CpuMeter()
+def cpu_meter(cgroup: str, usage: Callable[[str], CpuUsage]) -> Union[CpuMeter, CgroupCpuMeter]:
+    """The CPU meter for ``~battery/cpu_cgroup``: the cgroup's, read by ``usage(cgroup)`` (a bad name:
+    ValueError), or ('') one over the robot's processes."""
+    return CgroupCpuMeter(usage(cgroup)) if cgroup else CpuMeter()
 
 
 class NetMeter:

@@ -34,6 +34,9 @@ from dataclasses import dataclass, field
 from typing import Dict, Optional, Tuple
 
 
+INSTANCE_HEADER = 'cnr_instance'       # connection header of a managed instance's output publishers: its id
+
+
 def instance_id(module: str, host: str) -> str:
     """The name of a module's instance on a host, e.g. ``mfg@cloud``."""
     return f'{module}@{host}'

@@ -1,11 +1,12 @@
-"""The actuator's fence (ROS-free): velocity commands only from the move_base instance that holds the lease.
+"""An actuator's fence (ROS-free): commands only from the instance that holds the lease (the simulator's base
+obeys move_base's through :mod:`migration_manager.fence`).
 
 migration_manager moves move_base between the robot and the cloud; its leases make sure at most one instance
 commands at any time, and the fence here makes sure the base obeys only that one even if an old instance's
 commands are still on their way (queued in a link, a frozen process not stopped yet). A managed instance marks
-its publishers with the ``cnr_instance`` connection header (``module@host``); the simulator hears the
-grantor's lease answers and announcements (``/migration/<module>/lease``) and keeps the newest term's holder
-(:class:`migration_manager.core.lease.TermFilter`). A command is accepted when
+its publishers with the connection header :data:`migration_manager.core.lease.INSTANCE_HEADER` (``module@host``);
+the actuator hears the grantor's lease answers and announcements (``/migration/<module>/lease``) and keeps the
+newest term's holder (:class:`migration_manager.core.lease.TermFilter`). A command is accepted when
 
 - it carries no instance header (an unmanaged move_base, teleop, a test), or the header names an instance of
   another module (not this fence's to judge), or
@@ -18,9 +19,7 @@ from __future__ import annotations
 
 from typing import Mapping, Optional
 
-from migration_manager.core.lease import Answer, TermFilter
-
-INSTANCE_HEADER = 'cnr_instance'       # as migration_manager.instance.INSTANCE_HEADER (that module needs rospy)
+from migration_manager.core.lease import INSTANCE_HEADER, Answer, TermFilter
 
 
 class CommandFence:
@@ -54,6 +53,11 @@ class CommandFence:
         if not ok:
             self.dropped += 1
         return ok
+
+    def refusal(self, header: Optional[Mapping[str, str]]) -> str:
+        """Why a command from a publisher with this connection header was refused (for the log)."""
+        return (f'ignored velocity commands from {self.instance_of(header)}: {self.module} is held by '
+                f'{self.holder() or "no instance"} ({self.dropped} dropped so far)')
 
     def holder(self) -> str:
         """The current holder ('' none; 'unmanaged' if no lease was heard)."""
