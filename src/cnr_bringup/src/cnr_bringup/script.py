@@ -42,10 +42,13 @@ class Interrupted(Exception):
 
 class Parser(argparse.ArgumentParser):
     """The script's parser: ``--help`` shows ``doc`` (the entry module's docstring) under the usage; a bad
-    option is one line naming it and exit status 2."""
+    option is one line naming it and exit status 2 (subcommands' parsers too)."""
 
-    def __init__(self, prog: str, doc: str, **kwargs) -> None:
-        super().__init__(prog=prog, description=doc, formatter_class=argparse.RawDescriptionHelpFormatter, **kwargs)
+    def __init__(self, prog: Optional[str] = None, doc: Optional[str] = None, **kwargs) -> None:
+        kwargs.setdefault('formatter_class', argparse.RawDescriptionHelpFormatter)
+        if doc is not None:
+            kwargs['description'] = doc
+        super().__init__(prog=prog, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         self.exit(EXIT_CONFIG, f'{self.prog}: {message} (see --help)\n')

@@ -19,9 +19,8 @@ import os
 import sys
 import time
 
+from cnr_bringup.script import WS, Parser
 from cnr_params import ConfigError
-
-WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
 
 
 def _onoff(v: str) -> bool:
@@ -33,15 +32,17 @@ def _onoff(v: str) -> bool:
 
 
 def _nonneg(v: str) -> float:
-    x = float(v)
+    try:
+        x = float(v)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: '{v}'") from None
     if not x >= 0:
         raise argparse.ArgumentTypeError(f'must be >= 0, got {v}')
     return x
 
 
 def parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog='testbed.sh', description=__doc__.split('\n')[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter, epilog=__doc__)
+    ap = Parser('testbed.sh', __doc__.split('\n')[0], epilog=__doc__)
     ap.add_argument('--config', default=os.path.join(WS, 'config', 'testbed.yaml'))
     ap.add_argument('--name', help='instance name (default from the config); namespaces become NAME-robot/NAME-cloud '
                                    'when given')
