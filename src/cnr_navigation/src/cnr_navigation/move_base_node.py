@@ -311,6 +311,14 @@ class MoveBaseNode:
             server.set_service = None
         return taken
 
+    def _note_pursuit(self, goal_id: Optional[str]) -> None:
+        """Record the goal the state machine pursues (None: none) with its recovery state."""
+        goal = self.core.goal
+        if goal_id is None or goal is None:
+            self.pursuit = None
+            return
+        self.pursuit = (goal_id, goal, *self.core.recovery_state())
+
     def pause_inputs(self) -> None:
         """Odometry and tf unsubscribed, the costmaps asleep (their sensors unsubscribed, obstacles forgotten)."""
         self.odom_sub.unregister()
