@@ -1,10 +1,11 @@
-"""The options ``run_mission.sh`` (:mod:`cnr_mission.run`) and ``two_host_mission`` (:mod:`cnr_mission.two_host`)
-share: the link and the managed modules. ROS-free."""
+"""What ``run_mission.sh`` (:mod:`cnr_mission.run`) and ``two_host_mission`` (:mod:`cnr_mission.two_host`) share:
+the options of the link and of the managed modules, and the mission's "not found" exit status. ROS-free."""
 from __future__ import annotations
 
 import argparse
 from typing import Callable
 
+EXIT_NOT_FOUND = 3              # the mission ended without finding the hotspot (the mission monitor's status)
 DEFAULT_TASK = 'patrol'         # the task of --network-aware without one (config/decision.yaml tasks)
 
 

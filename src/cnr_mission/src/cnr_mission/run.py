@@ -42,11 +42,10 @@ from typing import List, Optional, Tuple
 from cnr_bringup.launcher import EXIT_INTERRUPTED, NOISE
 from cnr_bringup.script import WS, Interrupted, Parser, Processes, ScriptError, log, master_address, master_up, \
     port_number, run, setup_workspace
-from cnr_mission.options import DEFAULT_TASK, add_link_arguments, add_migration_arguments
+from cnr_mission.options import DEFAULT_TASK, EXIT_NOT_FOUND, add_link_arguments, add_migration_arguments
 from cnr_params.config import EXIT_CONFIG
 
 PROG = 'run_mission.sh'
-EXIT_NOT_FOUND = 3
 DEFAULT_PLACEMENT = 'move_base_cloud'
 NETWORK_AWARE_PLACEMENT = 'all_robot'
 NETWORK_AWARE_SCENARIO = 'corridor'     # the scenario of the network-aware mission's link map
@@ -57,7 +56,8 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
     ap = Parser(PROG, __doc__)
     ap.add_argument('--scenario', default='corridor', metavar='corridor|datacenter|FILE.yaml',
                     help='config/scenarios/NAME.yaml or a scenario file (default corridor)')
-    ap.add_argument('--port', type=port_number, help='master port (default: ROS_MASTER_URI, else 11311; two hosts: 11311)')
+    ap.add_argument('--port', type=port_number,
+                    help='master port (default: ROS_MASTER_URI, else 11311; two hosts: 11311)')
     ap.add_argument('--rtf', metavar='FACTOR', help='real-time factor, single master: 1 real time, 5 five times '
                     'faster (default), 0 as fast as possible; two hosts: 1 only')
     ap.add_argument('--report-dir', type=os.path.realpath, metavar='DIR',

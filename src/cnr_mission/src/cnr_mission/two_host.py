@@ -54,7 +54,7 @@ from cnr_bringup.launcher import EXIT_INTERRUPTED, NOISE
 from cnr_bringup.placement import Placement, launch_args, load_catalog, describe
 from cnr_harness import Proc, WaitTimeout, wait_until
 from cnr_mission.core.report import write_summary
-from cnr_mission.options import add_link_arguments, add_migration_arguments
+from cnr_mission.options import EXIT_NOT_FOUND, add_link_arguments, add_migration_arguments
 from cnr_params.config import EXIT_CONFIG, ConfigError, Section, load_yaml
 from cnr_testbed import cpucap
 from cnr_testbed.api import Testbed, TestbedError
@@ -62,7 +62,6 @@ from cnr_testbed.rosside import RosSide, bridge_config
 from migration_manager.cli import parse_placement
 
 DECIDER = '/migration_decider'          # network_monitor's migration_decider on the robot (host.launch decider)
-EXIT_NOT_FOUND = 3
 
 
 class Stop(Exception):
