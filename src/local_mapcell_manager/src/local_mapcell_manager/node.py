@@ -1,32 +1,30 @@
 """``local_mapcell_manager``: mapcells with visits, measurements and statistics; services and a disk store.
 
-Movable by migration_manager: as a managed standby it buffers ``merged_measurements`` but stores, publishes and
-serves nothing, and prepares the store from the active instance's replicas; on promotion it takes over the
-handed-over store (every measurement) and replays its buffer over it, so the measurements stored end up
-exactly once (README "Migration state")."""
+Movable by migration_manager: the node is built with the managed instance's hooks (:class:`StoreHooks`, those of
+:mod:`local_mapcell_manager.migration`, which also holds the executable's ``main``). As a standby the node
+buffers ``merged_measurements`` but stores, publishes and serves nothing; once active (:meth:`ManagerNode.activate`)
+it stores, publishes and serves (README "Migration state")."""
 from __future__ import annotations
 
 import math
 import os
 import threading
-from typing import Any, Dict, List, Optional
+from typing import Callable, List, Optional
 
 import rospy
 
-import cnr_params
 from cnr_msgs.msg import CellState as CellStateMsg
 from cnr_msgs.msg import CellStates, MergedMeasurement
 from cnr_msgs.srv import (GetCell, GetCellResponse, GetCellStates, GetCellStatesResponse, GetMeasurements,
                           GetMeasurementsResponse, GetRecentMeasurements)
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.measurements import Measurement
-from cnr_params.ros import private_section
-from cnr_runtime import call_with_timeout, init_node, quiet_at_shutdown
-from local_mapcell_manager.core.ledger import DUPLICATE, Ledger, Prepared, Reading, Replay, state_newest
-from local_mapcell_manager.core.params import ManagerParams, read_params
+from cnr_runtime import call_with_timeout, quiet_at_shutdown
+from local_mapcell_manager.core.ledger import DUPLICATE, Ledger, Reading, Replay
+from local_mapcell_manager.core.params import ManagerParams
 from local_mapcell_manager.core.store import CellBook, MeasurementStore
 from migration_manager import client
-from migration_manager.instance import Hooks, ManagedInstance, Retiring
+from migration_manager.instance import Hooks, ManagedInstance
 
 NOT_ACTIVE = f'{client.NOT_ACTIVE} (standby, frozen or lease lapsed)'
 
@@ -40,12 +38,20 @@ def cell_msg(grid: MapcellGrid, book: CellBook, index: int) -> CellStateMsg:
                         min_temperature=s.min, max_temperature=s.max)
 
 
-class ManagerNode(Hooks):
+class StoreHooks(Hooks):
+    """The managed instance's hooks a :class:`ManagerNode` is built with."""
+
+    def discard_prepared(self) -> None:
+        """A store prepared from the replicas is not used (promoted without a state, or started)."""
+        raise NotImplementedError
+
+
+class ManagerNode:
     """Lock order: ``self.instance.lock``, then ``self.lock`` (the instance calls ``set_state`` and, on a freeze,
     ``get_state`` holding its lock). A reading is stored and published under both, so a freeze (the final state
     taken) falls between two readings: what the frozen instance published is exactly what its state says."""
 
-    def __init__(self, p: ManagerParams) -> None:
+    def __init__(self, p: ManagerParams, hooks: Callable[['ManagerNode', MeasurementStore], StoreHooks]) -> None:
         self.p = p
         self.grid = p.grid
         self.lock = threading.Lock()
@@ -56,25 +62,20 @@ class ManagerNode(Hooks):
         for path in store.remove_stale_drafts():
             rospy.logwarn(f'removed {path}: a draft of the store left by an instance that ended before using it')
         self.ledger = Ledger(self.grid, store, p.standby_buffer, rospy.logwarn)
-        # a standby's store prepared from the replicas (None once promoted); its own lock, never held with
-        # self.lock by prepare_state, so a replica is prepared while measurements keep arriving
-        self.prepare_lock = threading.Lock()
-        self.prepared: Optional[Prepared] = Prepared(self.grid, store)
-        rospy.on_shutdown(self._discard_prepared)
+        self.migration = hooks(self, store)
         rospy.loginfo(f'{len(self.grid)} mapcells ({self.grid.cols} x {self.grid.rows} of {self.grid.cell_size:g} m); '
                       f'{self.ledger.count} stored measurements reloaded from {p.store}')
         self._dirty = True
         self.recover_proxy = (rospy.ServiceProxy(p.recover_service, GetRecentMeasurements)
                               if p.recover_service else None)
         self.services: list = []
-        self.retiring = Retiring()
         self._constructed = threading.Event()          # on_active (instance thread) waits for the publishers
         self.instance: Optional[ManagedInstance] = None
         self.sub: Optional[rospy.Subscriber] = None
         # the instance first (a managed one's subscriptions must carry its host in their caller id); a standby
         # reports ready only once its merged_measurements subscription is connected (hooks.standby_ready), so the
         # manager never freezes the active instance before this one buffers what follows
-        self.instance = ManagedInstance('local_mapcell_manager', self)
+        self.instance = ManagedInstance('local_mapcell_manager', self.migration)
         self.sub = rospy.Subscriber('merged_measurements', MergedMeasurement, self._on_measurement, queue_size=100)
         # created now, used once active: subscribers are connected by the time the pending ones are published
         self.pub: Optional[rospy.Publisher] = self.instance.publisher('cell_states', CellStates, queue_size=1,
@@ -83,72 +84,12 @@ class ManagerNode(Hooks):
         rospy.Timer(rospy.Duration(p.publish_period), lambda _e: self._publish())
         self._constructed.set()
         if not self.instance.managed:
-            self.on_active()
+            self.migration.on_active()
         else:
             rospy.loginfo('managed: standby until promoted (merged measurements are buffered, '
                           f'at most {p.standby_buffer})')
 
-    # -- migration (README "Migration state") -----------------------------------------------------
-    def standby_ready(self) -> bool:
-        """Connected to the merged measurements' publishers, or none is registered yet and no instance of the
-        module was ever promoted (the mission's first instance: the two-host mission starts the merger only once a
-        store is active, so waiting for it here would wait forever). Which of the two it is, the manager's
-        announcements say (term 0: never promoted): not ready before one has arrived. Once a term has been
-        announced a merger runs: a standby whose master does not list it (e.g. on the cloud just after an
-        outage, before the bridge has restored the registration) is not ready, or what the merger publishes
-        until it connects would reach no store."""
-        if self.sub is None or self.instance is None:
-            return False
-        if self.sub.get_num_connections() > 0:
-            return True
-        holder = self.instance.holder
-        if not holder.heard or holder.seen > 0:
-            return False
-        try:
-            return all(name != self.sub.resolved_name for name, _type in rospy.get_published_topics())
-        except (rospy.ROSException, OSError):
-            return False
-
-    def get_state(self) -> Dict[str, Any]:
-        with self.instance.lock, self.lock:            # (reentrant: a freeze calls this holding instance.lock)
-            self._sync_frozen()
-            return self.ledger.state()
-
-    def set_state(self, state: Dict[str, Any]) -> None:
-        with self.lock:
-            since = self.ledger.missing_since(state_newest(state))
-        recovered = self._recover(since)
-        with self.lock, self.prepare_lock:
-            added = self.ledger.recover(recovered)
-            replay = self.ledger.restore(state, self.prepared)     # ValueError: refused, nothing changed
-            self.prepared = None
-            self._dirty = True
-            count = self.ledger.count
-        ahead = 'restored whole' if replay.prepared is None else f'{replay.prepared} prepared ahead'
-        rospy.loginfo(f'state taken over: {count} measurements ({ahead}); '
-                      f'{self._recovered(since, recovered, added)}{self._replayed(replay)}')
-
-    def prepare_state(self, state: Dict[str, Any]) -> None:
-        """A replica of the active instance: what it adds is checked, filed and written into a draft of the
-        store now, so the promotion's set_state handles only what its state adds (ledger.Prepared)."""
-        with self.prepare_lock:
-            if self.prepared is None:                   # promoted meanwhile
-                return
-            try:
-                self.prepared.update(state)
-            except OSError as exc:
-                raise ValueError(f'cannot write a draft of the store next to {self.p.store}: {exc}') from None
-
-    def _discard_prepared(self) -> None:
-        """Promoted without a state, or shutting down: the prepared store is not used."""
-        if self.prepare_lock.acquire(timeout=1.0):
-            try:
-                prepared, self.prepared = self.prepared, None
-                if prepared is not None:
-                    prepared.discard()
-            finally:
-                self.prepare_lock.release()
-
+    # -- activation (the migration hooks are local_mapcell_manager.migration's) -----------------------
     def _recover(self, since: Optional[float]) -> List[Reading]:
         """The merger's retained measurements from ``since`` on (README "Recovery"); none if the buffer reaches
         back far enough (``since`` None), recovery is off, or the merger does not answer in time."""
@@ -175,14 +116,16 @@ class ManagerNode(Hooks):
             return ''
         return f'recovered {len(recovered)} retained measurement(s) since {since:.3f}, {added} not buffered; '
 
-    def on_active(self) -> None:
+    def activate(self) -> None:
+        """Store, publish and serve: a start or a promotion without a state takes up what the merger retained
+        since its own newest measurement; the waiting measurements are published, then the cell states."""
         self._constructed.wait()
         if self.instance.managed and self.pub is None:     # active again after a freeze (rolled back)
             self.pub = self.instance.publisher('cell_states', CellStates, queue_size=1, latch=True)
         with self.lock:                                 # a promotion without a state: the own content's newest
             since = None if self.ledger.storing else self.ledger.missing_since(self.ledger.newest_time)
         recovered = self._recover(since)
-        self._discard_prepared()                        # (promoted without a state: not used)
+        self.migration.discard_prepared()               # (promoted without a state: not used)
         with self.instance.lock, self.lock:
             own = self.ledger.count
             added = self.ledger.recover(recovered)      # nothing when already storing (no gap asked for)
@@ -196,24 +139,24 @@ class ManagerNode(Hooks):
             with self.lock:                             # output gap ends here
                 self._flush()
             self._publish(force=True)
-        self.retiring.close()                           # (promoted again before after_frozen ran: same names)
+
+    def open_services(self) -> None:
+        """``~get_cell``, ``~get_cell_states``, ``~get_measurements`` (they refuse while not active)."""
         if not self.services:                           # registrations with the master take a while
             self.services = [
                 rospy.Service('~get_cell', GetCell, self._get_cell),
                 rospy.Service('~get_cell_states', GetCellStates, self._get_cell_states),
                 rospy.Service('~get_measurements', GetMeasurements, self._get_measurements)]
 
-    def on_frozen(self) -> None:
-        with self.instance.lock, self.lock:
+    def close_outputs(self) -> list:
+        """Frozen: the latched cell_states publisher and the services, taken from the node (to be unregistered
+        once the freeze was answered; under the instance's lock)."""
+        with self.lock:
             self._sync_frozen()
             pub, self.pub = self.pub, None
-            self.retiring.add(pub, *self.services)
+            taken = [pub, *self.services]
             self.services = []
-
-    def after_frozen(self) -> None:
-        """The services (they refuse while frozen) and the latched cell_states (none of a frozen instance for late
-        subscribers) are unregistered once the freeze was answered."""
-        self.retiring.close()
+        return taken
 
     def _sync_frozen(self) -> None:
         """Under self.lock: a frozen instance stores nothing more and buffers again (a rollback may promote it
@@ -319,9 +262,3 @@ class ManagerNode(Hooks):
         out = [self._measurement_msg(m) for m in ms]
         return GetMeasurementsResponse(success=True, message=f'{len(out)} measurements', measurements=out)
 
-
-@cnr_params.exit_on_config_error
-def main() -> None:
-    init_node('local_mapcell_manager')
-    ManagerNode(read_params(private_section('~')))
-    rospy.spin()
