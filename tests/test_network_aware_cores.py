@@ -320,8 +320,8 @@ def test_control_of_an_unknown_task_names_both_places_and_exits_2(tmp_path, caps
 
 def test_control_results_go_per_task_and_location():
     from cnr_benchmarks import campaign as script
-    assert script.parse_args(['control', '--task', 'patrol']).out.endswith('bench_results/control/patrol@corridor')
-    assert script.parse_args(['campaign']).out.endswith('bench_results/campaign')
+    assert script.parse_args(['control', '--task', 'patrol']).out.endswith('docs/results/control/patrol@corridor')
+    assert script.parse_args(['campaign']).out.endswith('docs/results/campaign')
 
 
 def test_a_slowdown_has_its_own_results_control_values_and_config_copy(tmp_path):
@@ -335,7 +335,7 @@ def test_a_slowdown_has_its_own_results_control_values_and_config_copy(tmp_path)
     assert script.parse_args(['campaign']).control_values.endswith('config/control_values.yaml')
     lr = script.parse_args(['local_remote'])
     default = load_testbed(os.path.join(script.report.WS, 'config', 'testbed.yaml')).robot_cpu.slowdown
-    assert lr.slowdowns == [default, 2 * default] and lr.out.endswith('bench_results/local_remote')
+    assert lr.slowdowns == [default, 2 * default] and lr.out.endswith('docs/results/local_remote')
     cfg = script.slowdown_config(str(tmp_path), 6.5)
     assert load_testbed(os.path.join(cfg, 'testbed.yaml')).robot_cpu.cpus == pytest.approx(1 / 6.5)
     assert os.path.exists(os.path.join(cfg, 'migration.yaml'))
@@ -368,7 +368,7 @@ def test_control_values_from_the_all_local_rows_of_a_results_file(tmp_path):
     assert script.control(args) == 0
     values = load_control_values(str(cv), 'corridor_round_trip')
     assert values.runs == 3 and values.ct_mean == pytest.approx(22.0) and values.cb_mean == pytest.approx(0.004)
-    assert (tmp_path / 'out' / 'control.md').exists()
+    assert (tmp_path / 'out' / 'README.md').exists()
     args = script.parse_args(['control', '--from-rows', str(tmp_path / 'nope.tsv'), '--out', str(tmp_path / 'o2'),
                               '--control-values', str(tmp_path / 'cv2.yaml')])
     assert script.control(args) == 2 and not (tmp_path / 'cv2.yaml').exists()

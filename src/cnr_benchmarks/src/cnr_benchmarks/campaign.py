@@ -1,8 +1,9 @@
 """The control experiment (exp_control.sh) and the continuous experiment (exp_campaign.sh) of thesis §5 (root).
 
-    /usr/bin/python3 -m cnr_benchmarks.campaign control [--runs 20] [--out bench_results/control]
-    /usr/bin/python3 -m cnr_benchmarks.campaign campaign [--conditions 100] [--seed 1] [--out bench_results/campaign]
-    /usr/bin/python3 -m cnr_benchmarks.campaign analyse [--out bench_results/campaign]
+    /usr/bin/python3 -m cnr_benchmarks.campaign control [--runs 20] [--out DIR]       (launch_scripts/exp_control.sh)
+    /usr/bin/python3 -m cnr_benchmarks.campaign campaign [--conditions 100] [--seed 1] [--out DIR] [--analyse-only]
+                                                                                       (launch_scripts/exp_campaign.sh)
+    /usr/bin/python3 -m cnr_benchmarks.campaign analyse [--out DIR]
     /usr/bin/python3 -m cnr_benchmarks.campaign local_remote [--runs 20] [--slowdowns 3,6]
 
 Both run the two-host testbed in task mode (``two_host_mission --task-plan``): one session, the task_runner
@@ -16,18 +17,21 @@ not one of the location's ``tasks`` but a monitoring mission of config/decision.
 ``hotspot_search``: the main job's decision) is measured as the main job measures it: ``--runs`` whole two-host
 missions (placement all_robot, the modules run by migration agents as in the main job, no decider, the link of
 ``--link-map``, default config/link_map_<location>.yaml when there is one), T_task the sim time to the hotspot
-and B_task the battery used until then (the mission report's ``task``); each run in ``<out>/runs/NN``.
+and B_task the battery used until then (the mission report's ``task``); each run in ``<scratch>/runs/NN``.
 
 ``campaign``: ``--conditions`` link conditions drawn with ``--seed`` (cnr_benchmarks.core.campaign), each
 profiled once with the modules on the robot, decided by the robot's policy and run onload then offload; the
-robot's training set starts empty in ``<out>/training`` (cold start, then k-NN as it learns). Then
+robot's training set starts empty in ``<scratch>/training`` (cold start, then k-NN as it learns). Then
 ``analyse``: the learning curve against the oracle beside the best static threshold, and Figures 5-1 to 5-6 in
-``<out>/``, with campaign.md.
+``<out>/``, with the page README.md.
 
 ``local_remote`` (thesis Figs. 5-5/5-6): ``--runs`` runs local and as many remote (move_base on the cloud),
 alternating, on the unrestricted link, at each robot CPU slowdown of ``--slowdowns`` (the thesis compared local
-CPU frequencies); local_remote.md and the two figures. ``--slowdown S`` runs control or campaign with the robot
-capped at 1/S CPU: on a copy of config/ in ``<out>/slowdown_<S>`` whose testbed.yaml says so.
+CPU frequencies); the page README.md and the two figures. ``--slowdown S`` runs control or campaign with the robot
+capped at 1/S CPU: on a copy of config/ in ``<scratch>/slowdown_<S>`` whose testbed.yaml says so.
+
+``<out>``: the page and its rows, default docs/results/<experiment>/; ``<scratch>``: the sessions' logs,
+plans, runs and training sets, bench_results/<experiment>/ (with ``--out``: the same folder).
 """
 from __future__ import annotations
 
@@ -36,56 +40,79 @@ import datetime
 import json
 import os
 import statistics
-import subprocess
 import sys
 import time
 from typing import Dict, List, Optional
 
 import yaml
 
-from cnr_benchmarks import report
+from cnr_benchmarks import cli, report, results
+from cnr_benchmarks.campaign_figures import COMMAND_FILE, write_analysis, write_local_remote
 from cnr_benchmarks.core import campaign as core
+from cnr_benchmarks.session import run_session, slowdown_config, slowdown_dir, testbed_running, two_host_argv
+from cnr_params.files import write_atomic
 
 THESIS_CT, THESIS_CT_SD = 87.9286, 14.3815          # s, Table 4-5
 THESIS_CB, THESIS_CB_SD = 0.004586, 0.000702        # battery fraction, Table 4-5
 
+CONTROL_DOC = """The control experiment of thesis Table 4-5.
 
-def two_host_argv(location: str, report_dir: str, port: int, cfg_dir: Optional[str] = None) -> Optional[List[str]]:
-    """The two_host_mission command for the location's scenario with every module on the robot at the start
-    (the nodes' configuration from ``cfg_dir``, default the workspace's config/); None (the scenario's problem
-    printed in one line) when check_scenario refuses it."""
-    cfg_dir = cfg_dir or os.path.join(report.WS, 'config')
-    scenario = os.path.join(cfg_dir, 'scenarios', f'{location}.yaml')
-    line = subprocess.run(['rosrun', 'cnr_mission', 'check_scenario', scenario], capture_output=True, text=True)
-    if line.returncode != 0:
-        print(line.stderr.strip(), file=sys.stderr)
-        return None
-    _name, map_file, x, y, a = line.stdout.split()
-    return ['rosrun', 'cnr_mission', 'two_host_mission', '--config-dir', cfg_dir, '--scenario', scenario,
-            '--map', map_file, '--start', x, y, a, '--placement', 'all_robot', '--report-dir', report_dir,
-            '--port', str(port)]
+    launch_scripts/exp_control.sh [--runs 20] [--task T] [--location L] [--out DIR] [--control-values FILE]
+                                  [--settle 6] [--port 11411] [--link-map FILE] [--slowdown S] [--from-rows FILE]
 
+--runs runs (default 20) of the task (default corridor_round_trip@corridor: config/scenarios/corridor.yaml tasks) on
+the two-host testbed with every module on the robot and no decision; CT (task time) and CB (battery fraction) as mean
+and sd of the completed runs are written to config/control_values.yaml (Eq. 4-5's control values) and printed beside
+the thesis's CT 87.9286 s (sd 14.3815), CB 0.004586 (sd 0.000702). Needs root; uses the default testbed (robot/cloud
+namespaces). The page and the rows (results.tsv, appended as measured: run it again to resume) go to
+docs/results/control/<task>@<location>/ (or DIR); the sessions' logs to bench_results/control/<task>@<location>/.
+--task patrol (or hotspot_search: a monitoring mission of config/decision.yaml, the main job's decision) runs whole
+two-host missions instead, as the main job measures them (T to the hotspot, B until then), with the link of
+--link-map (default config/link_map_<location>.yaml); about 4 minutes each.
 
-def run_session(args: argparse.Namespace, plan: Dict, results: str, training_dir: str, control_values: str,
-                out: Optional[str] = None, cfg_dir: Optional[str] = None) -> int:
-    """Write the plan and run the two-host task session over it in ``out`` (default ``args.out``; its output
-    passes through)."""
-    out = out or args.out
-    cfg_dir = cfg_dir or getattr(args, 'cfg_dir', None)
-    os.makedirs(out, exist_ok=True)
-    plan_path = os.path.join(out, 'plan.yaml')
-    with open(plan_path, 'w') as f:
-        yaml.safe_dump(plan, f, sort_keys=False)
-    session = os.path.join(out, 'session')
-    if os.path.exists(session):
-        os.replace(session, f'{session}.prev{int(time.time())}')
-    argv = two_host_argv(plan['location'], session, args.port, cfg_dir)
-    if argv is None:
-        return 2
-    argv += ['--task-plan', plan_path, '--task-results', results, '--training-dir', training_dir,
-             '--control-values', control_values]
-    report.progress(f'[campaign] {len(plan["runs"])} runs of {plan["task"]}@{plan["location"]}; rows in {results}')
-    return report.call(argv)
+--slowdown S measures them with the robot's CPU capped at 1/S (default config/testbed.yaml's robot_cpu.slowdown):
+written to docs/results/control/control_values_slowdown<S>.yaml, the page in
+docs/results/control/<task>@<location>_slowdown<S>/. --from-rows FILE runs nothing: the control values of the
+all-local runs of a results TSV, e.g. the onload runs of exp_local_remote.sh
+(docs/results/local_remote/slowdown_<S>/results.tsv: the same task, every module local).
+"""
+
+CAMPAIGN_DOC = """The continuous experiment of thesis §5.
+
+    launch_scripts/exp_campaign.sh [--conditions 100] [--seed 1] [--out DIR] [--test-fraction 0.3]
+                                   [--rtt-min 0 --rtt-max 200 --rate-min 0.5 --rate-max 50 --loss-min 0
+                                    --loss-max 0.05] [--settle 6] [--port 11411] [--slowdown S]
+    launch_scripts/exp_campaign.sh --analyse-only [--out DIR] [--exclude c0017,...]
+
+--conditions link conditions (default 100; RTT 0-200 ms, rate 0.5-50 Mbit/s log-uniform, loss 0-5 %, drawn with
+--seed) on the two-host testbed, each profiled once with move_base on the robot and decided by network_monitor's
+migration_decider (k-NN), then run onload and offload on that profile; both runs evaluated (Eq. 4-5) and learned from
+an empty training set. Then the analysis: the decisions against the oracle of the paired runs, the learning curve
+beside the best static threshold, and Figures 5-1 to 5-6 beside the thesis's numbers, in docs/results/campaign/ (or
+DIR; with --slowdown S: docs/results/campaign_slowdown<S>/); the sessions' logs and the training set in
+bench_results/campaign[_slowdown<S>]/. Needs the control values (exp_control.sh) and root; uses the default testbed.
+Rows are appended as measured; run it again to resume. About 66 s per condition. --slowdown S: the robot's CPU capped
+at 1/S instead of config/testbed.yaml's, with the control values of exp_control.sh --slowdown S.
+--analyse-only: the analysis and figures of the rows so far (--exclude: conditions left out, named on the page).
+"""
+
+LOCAL_REMOTE_DOC = """Thesis Figs. 5-5 and 5-6: local vs remote move_base on an unrestricted link.
+
+    launch_scripts/exp_local_remote.sh [--runs 20] [--slowdowns 3,6] [--out DIR] [--task T] [--location L]
+                                       [--port 11411]
+    launch_scripts/exp_local_remote.sh --analyse-only [--slowdowns 3,6] [--out DIR]   # table and figures only
+
+The task (default corridor_round_trip@corridor) --runs times with every module on the robot and --runs times with
+move_base on the cloud (alternating), on the unrestricted link, at each robot CPU slowdown of --slowdowns (default
+config/testbed.yaml's robot_cpu.slowdown and twice it: the thesis compared local CPU frequencies). Battery and time
+per task, mean and sd, beside the thesis's (remote -10 % battery, -2.4 s): the page and its figures in
+docs/results/local_remote/ (or DIR), the rows in its slowdown_<s>/results.tsv (appended as measured: run it again to
+resume), the sessions' logs in bench_results/local_remote/. Needs root and no running testbed. About 25 s per run.
+"""
+
+SCRIPTS = {'control': ('exp_control.sh', CONTROL_DOC), 'campaign': ('exp_campaign.sh', CAMPAIGN_DOC),
+           'analyse': ('exp_campaign.sh --analyse-only', CAMPAIGN_DOC),
+           'local_remote': ('exp_local_remote.sh', LOCAL_REMOTE_DOC)}
 
 
 # ---------------------------------------------------------------- control (Table 4-5)
@@ -98,10 +125,10 @@ def control(args: argparse.Namespace) -> int:
         return control_missions(args, scenario)
     if args.from_rows:
         return control_from_rows(args)
-    results = os.path.join(args.out, 'results.tsv')
+    rows_path = os.path.join(args.out, 'results.tsv')
     plan = core.control_plan(args.task, args.location, args.settle, args.runs)
-    rc = run_session(args, plan, results, os.path.join(args.out, 'training'), args.control_values)
-    rows, _ = read_results(results)
+    rc = run_session(args, plan, rows_path, os.path.join(args.scratch, 'training'), args.control_values)
+    rows, _ = read_results(rows_path)
     return write_control(args, rows) or rc
 
 
@@ -143,11 +170,10 @@ def write_control(args: argparse.Namespace, rows: List[Dict]) -> int:
           f'{THESIS_CB:.6f} ({THESIS_CB_SD:.6f})'],
          [f'measured ({args.task}@{args.location})', len(done), f'{values.ct_mean:.2f} ({values.ct_std:.2f})',
           f'{values.cb_mean:.6f} ({values.cb_std:.6f})']])
-    text = (f'# Control values (thesis Table 4-5)\n\n`{values.command}` ({values.date}); every module on the '
-            f'robot, {len(rows)} runs, {len(done)} completed. Written to `{args.control_values}`.\n\n{table}\n')
-    os.makedirs(args.out, exist_ok=True)
-    report.write_text(os.path.join(args.out, 'control.md'), text)
-    print(text, flush=True)
+    body = (f'Measured {values.date}; every module on the robot, {len(rows)} runs, {len(done)} completed. Written '
+            f'to `{args.control_values}`.\n\n{table}\n')
+    print(results.write_page(args.out, 'Control values CT and CB', 'thesis Table 4-5', body, values.command),
+          flush=True)
     return 0
 
 
@@ -162,7 +188,7 @@ def control_missions(args: argparse.Namespace, scenario: str) -> int:
     if link_map is None:
         default = os.path.join(report.WS, 'config', f'link_map_{args.location}.yaml')
         link_map = default if os.path.exists(default) else ''
-    runs_dir = os.path.join(args.out, 'runs')
+    runs_dir = os.path.join(args.scratch, 'runs')
     rows: List[Dict] = []
     for i in range(1, args.runs + 1):
         run = os.path.join(runs_dir, f'{i:02d}')
@@ -189,65 +215,31 @@ def control_missions(args: argparse.Namespace, scenario: str) -> int:
                          b_task=task['b_task']))
         report.progress(f'[control] run {i}: {task["mission_status"]}, T {task["t_task"]:.1f} s, '
                         f'B {task["b_task"]:.5f}')
-    os.makedirs(args.out, exist_ok=True)
-    with open(os.path.join(args.out, 'results.tsv'), 'w') as f:     # a table of the runs' reports (rewritten)
-        f.write('id\tmission_status\tt_task\tb_task\n')
-        for r in rows:
-            f.write(f'{r["id"]}\t{r["mission_status"]}\t{r["t_task"]}\t{r["b_task"]}\n')
+    os.makedirs(args.out, exist_ok=True)            # a table of the runs' reports (rewritten)
+    columns = ['id', 'mission_status', 't_task', 'b_task']
+    results.write_tsv(os.path.join(args.out, 'results.tsv'), columns,
+                      [[str(r[c]) for c in columns] for r in rows])
     return write_control(args, rows)
 
 
 # ---------------------------------------------------------------- local vs remote (Figs. 5-5, 5-6)
-def slowdown_dir(out: str, slowdown: float) -> str:
-    return os.path.join(out, f'slowdown_{slowdown:g}')
-
-
-def slowdown_config(out: str, slowdown: float, src: Optional[str] = None) -> str:
-    """A copy of ``src`` (default the workspace's config/) whose testbed.yaml caps the robot at 1/``slowdown`` CPU
-    (the thesis's "different local CPU frequency"); rewritten on every run so it follows the configuration."""
-    import shutil
-    dst = os.path.join(slowdown_dir(out, slowdown), 'config')
-    src = os.path.abspath(src or os.path.join(report.WS, 'config'))
-    if src != os.path.abspath(dst):          # (a copy made before is only updated)
-        if os.path.exists(dst):
-            shutil.rmtree(dst)
-        shutil.copytree(src, dst)
-    path = os.path.join(dst, 'testbed.yaml')
-    with open(path) as f:
-        doc = yaml.safe_load(f)
-    doc['testbed']['robot_cpu'].update(enabled=True, slowdown=slowdown)
-    with open(path, 'w') as f:
-        yaml.safe_dump(doc, f, sort_keys=False)
-    return dst
-
-
-def testbed_running(prog: str) -> bool:
-    """True (said in one line) when a testbed is up: its robot cgroup keeps the cap it was made with, so a
-    ``--slowdown`` would not apply."""
-    from cnr_testbed.api import Testbed
-    if Testbed(os.path.join(report.WS, 'config', 'testbed.yaml')).running():
-        print(f'{prog}: a testbed is running and its robot CPU cap would be used instead of --slowdown\'s: stop it '
-              f'first (launch_scripts/testbed.sh down)', file=sys.stderr)
-        return True
-    return False
-
-
 def local_remote(args: argparse.Namespace) -> int:
     if testbed_running('exp_local_remote'):
         return 2
     rc = 0
     for s in args.slowdowns:
         out = slowdown_dir(args.out, s)
+        scratch = slowdown_dir(args.scratch, s)
         report.progress(f'[local_remote] robot CPU slowdown {s:g} (cap {1 / s:.3g} CPU): {args.runs} runs local and '
                         f'{args.runs} remote, alternating; rows in {out}/results.tsv')
         plan = core.local_remote_plan(args.task, args.location, args.settle, args.runs)
-        rc = run_session(args, plan, os.path.join(out, 'results.tsv'), os.path.join(out, 'training'),
-                         args.control_values, out=out, cfg_dir=slowdown_config(args.out, s))
+        os.makedirs(out, exist_ok=True)
+        rc = run_session(args, plan, os.path.join(out, 'results.tsv'), os.path.join(scratch, 'training'),
+                         args.control_values, scratch=scratch, cfg_dir=slowdown_config(args.scratch, s))
         if rc != 0:
             print(f'exp_local_remote: the session at slowdown {s:g} ended with status {rc}; run the same command '
                   f'again to resume', file=sys.stderr)
             break
-    from cnr_benchmarks.campaign_figures import write_local_remote
     return write_local_remote(args) or rc
 
 
@@ -257,29 +249,31 @@ def campaign(args: argparse.Namespace) -> int:
     conditions = core.draw_conditions(args.conditions, args.seed, ranges)
     plan = core.plan_document(args.task, args.location, args.settle, conditions)
     plan['seed'] = args.seed
-    results = os.path.join(args.out, 'results.tsv')
+    rows_path = os.path.join(args.out, 'results.tsv')
     os.makedirs(args.out, exist_ok=True)         # the command that made the rows, for a later --analyse-only
-    report.write_text(os.path.join(args.out, 'command.txt'), 'launch_scripts/exp_campaign.sh ' + ' '.join(args.argv))
+    write_atomic(os.path.join(args.out, COMMAND_FILE), 'launch_scripts/exp_campaign.sh ' + ' '.join(args.argv))
     t0 = time.monotonic()
-    rc = run_session(args, plan, results, os.path.join(args.out, 'training'), args.control_values)
+    rc = run_session(args, plan, rows_path, os.path.join(args.scratch, 'training'), args.control_values)
     report.progress(f'[campaign] session ended with status {rc} after {(time.monotonic() - t0) / 60:.1f} min')
     return analyse(args) or rc
 
 
 def analyse(args: argparse.Namespace) -> int:
-    from cnr_benchmarks.campaign_figures import write_analysis
     return write_analysis(args)
 
 
 def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(prog='campaign', description=__doc__.split('\n')[0])
+    ap = cli.Parser('python3 -m cnr_benchmarks.campaign', __doc__)
     sub = ap.add_subparsers(dest='cmd', required=True)
+    parsers = {}
     for name in ('control', 'campaign', 'analyse', 'local_remote'):
-        p = sub.add_parser(name)
+        script, doc = SCRIPTS[name]
+        p = parsers[name] = sub.add_parser(name, prog=script, doc=doc)
         p.add_argument('--task', default='corridor_round_trip', help='a task of config/decision.yaml')
         p.add_argument('--location', default='corridor', help='config/scenarios/<location>.yaml')
-        p.add_argument('--out', default=None, help='default bench_results/control/<task>@<location> (control), '
-                                                    'bench_results/campaign')
+        p.add_argument('--out', default=None, help="the page's folder (default docs/results/control/<task>@<location>"
+                                                   ", docs/results/campaign[_slowdown<S>], docs/results/local_remote;"
+                                                   " the runs' scratch then in bench_results/, else in the folder)")
         p.add_argument('--port', type=int, default=11411, help='master port in both namespaces')
         p.add_argument('--settle', type=float, default=6.0,
                        help='s after setting a link before profiling (the network monitor window is 5 s)')
@@ -292,8 +286,11 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
         else:
             p.add_argument('--slowdown', type=float, default=None,
                            help="the robot's CPU slowdown (default config/testbed.yaml's); another one runs on a "
-                                "copy of config/ in <out>/slowdown_<s> and its control values default to "
+                                "copy of config/ in the scratch's slowdown_<s> and its control values default to "
                                 "docs/results/control/control_values_slowdown<s>.yaml")
+        if name == 'campaign':
+            p.add_argument('--analyse-only', action='store_true',
+                           help='the analysis and figures of the rows so far (runs nothing)')
         if name == 'control':
             p.add_argument('--runs', type=int, default=20)
             p.add_argument('--from-rows', default=None,
@@ -310,17 +307,21 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
             for k, v in (('rtt-min', 0.0), ('rtt-max', 200.0), ('rate-min', 0.5), ('rate-max', 50.0),
                          ('loss-min', 0.0), ('loss-max', 0.05)):
                 p.add_argument(f'--{k}', type=float, default=v)
-    args = ap.parse_args(argv)
+    args, extra = ap.parse_known_args(argv)
+    ap = parsers[args.cmd]              # errors from here on name the script
+    if extra:
+        ap.error(f'unrecognized arguments: {" ".join(extra)}')
     args.argv = list(argv if argv is not None else sys.argv[1:])
     args.argv.remove(args.cmd)          # the script's own arguments (the subcommand is the script's choice)
     if args.cmd == 'analyse':
         args.argv.insert(0, '--analyse-only')       # exp_campaign.sh's spelling of the subcommand
+    elif getattr(args, 'analyse_only', False) and args.cmd == 'campaign':
+        args.cmd = 'analyse'
     suffix = f'_slowdown{args.slowdown:g}' if getattr(args, 'slowdown', None) is not None else ''
-    if args.out is None:
-        args.out = os.path.join(report.WS, 'bench_results', *(('control', f'{args.task}@{args.location}{suffix}')
-                                                              if args.cmd == 'control' else
-                                                              ('local_remote',) if args.cmd == 'local_remote'
-                                                              else (f'campaign{suffix}',)))
+    experiment = (os.path.join('control', f'{args.task}@{args.location}{suffix}') if args.cmd == 'control' else
+                  'local_remote' if args.cmd == 'local_remote' else f'campaign{suffix}')
+    args.scratch = os.path.abspath(args.out or results.scratch_dir(experiment))
+    args.out = args.out or results.results_dir(experiment)
     if args.cmd == 'local_remote':
         args.slowdowns = parse_slowdowns(ap, args.slowdowns)
     elif args.slowdown is not None and args.slowdown < 1.0:
@@ -351,16 +352,14 @@ def parse_slowdowns(ap: argparse.ArgumentParser, text: Optional[str]) -> List[fl
 def main(argv: Optional[List[str]] = None) -> int:
     args = parse_args(argv)
     if args.cmd == 'local_remote' and args.analyse_only:
-        from cnr_benchmarks.campaign_figures import write_local_remote
-        return write_local_remote(args)
+            return write_local_remote(args)
     runs_nothing = args.cmd == 'analyse' or (args.cmd == 'control' and getattr(args, 'from_rows', None))
-    if not runs_nothing and os.geteuid() != 0:
-        print('campaign: needs root (the testbed\'s network namespaces and TUN devices)', file=sys.stderr)
-        return 2
+    if not runs_nothing:
+        cli.require_root(SCRIPTS[args.cmd][0], "the testbed's network namespaces, TUN devices and CPU cgroup")
     if args.cmd in ('control', 'campaign') and args.slowdown is not None and not runs_nothing:
         if testbed_running(f'exp_{args.cmd}'):
             return 2
-        args.cfg_dir = slowdown_config(args.out, args.slowdown)
+        args.cfg_dir = slowdown_config(args.scratch, args.slowdown)
     return {'control': control, 'campaign': campaign, 'analyse': analyse,
             'local_remote': local_remote}[args.cmd](args)
 

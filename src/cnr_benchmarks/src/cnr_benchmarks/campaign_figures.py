@@ -1,6 +1,7 @@
 """The campaign's analysis: oracle accuracy, learning curve and Figures 5-1 to 5-6 beside the thesis's numbers
-(``campaign analyse``; cnr_benchmarks.core.campaign has the computations). Writes into ``--out``:
-learning_curve.tsv, fig5_1_decision_map.png ... fig5_6_time.png and campaign.md."""
+(``campaign analyse``; cnr_benchmarks.core.campaign has the computations), one function per figure and table.
+Writes into ``--out``: learning_curve.tsv, learning_curve_paired.tsv, fig5_1_decision_map.png ... fig5_6_time.png
+and the page README.md; and the local-vs-remote page (``local_remote``)."""
 from __future__ import annotations
 
 import argparse
@@ -8,7 +9,8 @@ import math
 import os
 import statistics
 import sys
-from typing import Dict, Optional, Sequence
+from dataclasses import dataclass
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import matplotlib
 
@@ -16,8 +18,11 @@ matplotlib.use('Agg')
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
-from cnr_benchmarks import report  # noqa: E402
+from cnr_benchmarks import report, results  # noqa: E402
 from cnr_benchmarks.core import campaign as core  # noqa: E402
+from cnr_benchmarks.session import slowdown_dir  # noqa: E402
+
+COMMAND_FILE = 'command.txt'        # in the campaign's folder: the command that made its rows
 
 
 def _num(row: Dict[str, str], key: str) -> float:
@@ -34,30 +39,87 @@ def _fmt(x: float, digits: int = 1) -> str:
 def _command(args: argparse.Namespace) -> str:
     """The command that made the rows (``<out>/command.txt``, written by the campaign) and, if it differs, the one
     that analysed them."""
-    this = f'launch_scripts/exp_campaign.sh {" ".join(args.argv)}'
-    path = os.path.join(args.out, 'command.txt')
-    made = open(path).read().strip() if os.path.exists(path) else this
+    this = _this_command(args)
+    made = _made_command(args)
     return f'`{made}`' + ('' if made == this else f' (analysed by `{this}`)')
 
 
-def write_analysis(args: argparse.Namespace) -> int:
-    from cnr_mission.core.task import COMPLETED, read_results
+def _this_command(args: argparse.Namespace) -> str:
+    return f'launch_scripts/exp_campaign.sh {" ".join(args.argv)}'
+
+
+def _made_command(args: argparse.Namespace) -> str:
+    path = os.path.join(args.out, COMMAND_FILE)
+    return open(path).read().strip() if os.path.exists(path) else _this_command(args)
+
+
+def _shown(path: str) -> str:
+    """``path`` relative to the workspace when it lies inside it."""
+    return os.path.relpath(path, report.WS) if path.startswith(report.WS + os.sep) else path
+
+
+LEARNING_CURVE_KEYS = ('rows', 'knn', 'static', 'knn_noise', 'static_noise', 'rule_rtt', 'rule_r_bw', 'held_out',
+                       'train_conditions')
+FIGURE_SIZE = (6.4, 4.8)
+
+
+@dataclass
+class Analysis:
+    """A campaign's rows read and paired, judged by the oracles, with the learning curves of its training rows."""
+    args: argparse.Namespace
+    rows: List[Dict[str, str]]          # the rows analysed (--exclude left out)
+    all_rows: List[Dict[str, str]]      # every row
+    excluded: List[str]
+    decision: Any                       # config/decision.yaml's decision section
+    control: Any                        # the control values (CT, CB)
+    learned: List[Any]                  # the training rows the robot learned itself
+    training_warnings: List[str]
+    pairs: List[Any]
+    oracle: List[str]                   # strict: every pair has a winner
+    oracle_noise: List[str]             # noise-aware: EITHER within the noise
+    tolerance: float
+    n_train: int
+    n_test: int
+    curve: List[Dict]                   # learning curve of the rows learned during the training conditions
+    curve_p: List[Dict]                 # the same with one row per training pair, labelled by its oracle
+
+    @property
+    def offload_rows(self) -> List[Dict[str, str]]:
+        from network_monitor.core.evaluation import OFFLOAD
+        return [r for r in self.rows if r['decision'] == OFFLOAD]
+
+    @property
+    def onload_rows(self) -> List[Dict[str, str]]:
+        from network_monitor.core.evaluation import ONLOAD
+        return [r for r in self.rows if r['decision'] == ONLOAD]
+
+    @property
+    def done_off(self) -> List[Dict[str, str]]:
+        """The offloaded runs that completed."""
+        from cnr_mission.core.task import COMPLETED
+        return [r for r in self.offload_rows if r['mission_status'] == COMPLETED]
+
+
+def load_analysis(args: argparse.Namespace) -> Union[Analysis, int]:
+    """The campaign's analysis, or the exit status after a one-line problem (2: bad --exclude or control values,
+    1: no rows)."""
+    from cnr_mission.core.task import read_results
     from cnr_params import ConfigError
     from network_monitor.core.decision_config import load_decision_config
-    from network_monitor.core.evaluation import OFFLOAD, ONLOAD, load_control_values
+    from network_monitor.core.evaluation import load_control_values
     from network_monitor.core.training import TrainingSet
-    results = os.path.join(args.out, 'results.tsv')
-    rows, warnings = read_results(results)
+    rows_path = os.path.join(args.out, 'results.tsv')
+    rows, warnings = read_results(rows_path)
     for w in warnings:
         print(w, file=sys.stderr)
     excluded = sorted({c for c in args.exclude.split(',') if c})
     unknown = [c for c in excluded if c not in {r['condition'] for r in rows}]
     if unknown:
-        print(f'campaign analyse: --exclude: no such condition in {results}: {", ".join(unknown)}', file=sys.stderr)
+        print(f'campaign analyse: --exclude: no such condition in {rows_path}: {", ".join(unknown)}', file=sys.stderr)
         return 2
     all_rows, rows = rows, [r for r in rows if r['condition'] not in excluded]
     if not rows:
-        print(f'campaign analyse: no results in {results}', file=sys.stderr)
+        print(f'campaign analyse: no results in {rows_path}', file=sys.stderr)
         return 1
     cfg = load_decision_config(os.path.join(report.WS, 'config', 'decision.yaml'))
     try:
@@ -65,12 +127,11 @@ def write_analysis(args: argparse.Namespace) -> int:
     except ConfigError as exc:
         print(f'campaign analyse: {exc}', file=sys.stderr)
         return 2
-    training, tw = TrainingSet(os.path.join(args.out, 'training'), args.task, args.location).read()
+    training, tw = TrainingSet(os.path.join(args.scratch, 'training'), args.task, args.location).read()
     pairs = core.pairs(rows, cfg.decision.k)
-    oracle = [core.oracle(p, control) for p in pairs]                      # strict: every pair has a winner
+    oracle = [core.oracle(p, control) for p in pairs]
     tolerance = core.noise_tolerance(control)
-    oracle_noise = [core.oracle(p, control, tolerance) for p in pairs]    # noise-aware: EITHER within the noise
-    either = sum(1 for o in oracle_noise if o == core.EITHER)
+    oracle_noise = [core.oracle(p, control, tolerance) for p in pairs]
     n_test = int(round(len(pairs) * args.test_fraction))
     n_train = len(pairs) - n_test
     train_ids = {p.condition for p in pairs[:n_train]}
@@ -81,73 +142,82 @@ def write_analysis(args: argparse.Namespace) -> int:
         return next((c for a, b, c in spans if a <= t <= b + 1.0), '')
     learned = [t for t in training if t.source == 'local']
     train_rows = [t for t in learned if condition_of(t.timestamp) in train_ids]
-    curve = core.learning_curve(train_rows, n_train, pairs[n_train:], oracle[n_train:], cfg.decision)
-    curve_noise = core.learning_curve(train_rows, n_train, pairs[n_train:], oracle_noise[n_train:], cfg.decision)
+    curve = _learning_curve(train_rows, n_train, pairs, oracle, oracle_noise, cfg.decision)
+    # the same with one row per training pair labelled by the pair's (strict) oracle (core.paired_rows)
+    paired = core.paired_rows(pairs[:n_train], oracle[:n_train])
+    curve_p = _learning_curve(paired, n_train, pairs, oracle, oracle_noise, cfg.decision)
+    return Analysis(args, rows, all_rows, excluded, cfg.decision, control, learned, tw, pairs, oracle, oracle_noise,
+                    tolerance, n_train, n_test, curve, curve_p)
+
+
+def _learning_curve(train_rows: Sequence, n_train: int, pairs: Sequence, oracle: Sequence[str],
+                    oracle_noise: Sequence[str], decision) -> List[Dict]:
+    """k-NN and the best static threshold on the held-out pairs as the training rows grow, against both oracles."""
+    curve = core.learning_curve(train_rows, n_train, pairs[n_train:], oracle[n_train:], decision)
+    curve_noise = core.learning_curve(train_rows, n_train, pairs[n_train:], oracle_noise[n_train:], decision)
     for c, cn in zip(curve, curve_noise):
         c.update(knn_noise=cn['knn'], static_noise=cn['static'])
-    with open(os.path.join(args.out, 'learning_curve.tsv'), 'w') as f:
-        keys = ('rows', 'knn', 'static', 'knn_noise', 'static_noise', 'rule_rtt', 'rule_r_bw', 'held_out',
-                'train_conditions')
-        f.write('\t'.join(keys) + '\n')
-        for c in curve:
-            f.write('\t'.join(str(c[k]) for k in keys) + '\n')
+    return curve
 
-    # the same with one row per training pair labelled by the pair's (strict) oracle (core.paired_rows)
-    prs = core.paired_rows(pairs[:n_train], oracle[:n_train])
-    curve_p = core.learning_curve(prs, n_train, pairs[n_train:], oracle[n_train:], cfg.decision)
-    curve_pn = core.learning_curve(prs, n_train, pairs[n_train:], oracle_noise[n_train:], cfg.decision)
-    for c, cn in zip(curve_p, curve_pn):
-        c.update(knn_noise=cn['knn'], static_noise=cn['static'])
-    with open(os.path.join(args.out, 'learning_curve_paired.tsv'), 'w') as f:
-        f.write('\t'.join(keys) + '\n')
-        for c in curve_p:
-            f.write('\t'.join(str(c[k]) for k in keys) + '\n')
 
-    def agreeing(labels: Sequence[str], lo: int = 0) -> int:
-        return sum(1 for p, o in zip(pairs[lo:], labels[lo:]) if core.agrees(p.decided, o))
-    online, online_late = agreeing(oracle), agreeing(oracle, n_train)
-    online_n, online_late_n = agreeing(oracle_noise), agreeing(oracle_noise, n_train)
-    offload_rows = [r for r in rows if r['decision'] == OFFLOAD]
-    onload_rows = [r for r in rows if r['decision'] == ONLOAD]
+def learning_curve_table(curve: Sequence[Dict]) -> Tuple[Sequence[str], List[List[str]]]:
+    """A learning curve as TSV columns and rows."""
+    return LEARNING_CURVE_KEYS, [[str(c[k]) for k in LEARNING_CURVE_KEYS] for c in curve]
 
-    # ---- Fig. 5-1: the k-NN decision map over (RTT, R_bw) with the rows
+
+def fig_decision_map(a: Analysis):
+    """Fig. 5-1: the k-NN decision map over (RTT, R_bw) with the learned rows."""
     from network_monitor.core.decision import Decider, DecisionSettings, Exploration
-    s = cfg.decision
+    from network_monitor.core.evaluation import OFFLOAD, ONLOAD
+    s = a.decision
     final = Decider(DecisionSettings(s.k, s.normalisation, s.cold_start, Exploration(0.0, s.exploration.max_rtt, 0)),
-                    learned)
-    rtt_axis = np.linspace(0.0, max([0.25] + [1.05 * t.c_l for t in learned]), 120)
+                    a.learned)
+    rtt_axis = np.linspace(0.0, max([0.25] + [1.05 * t.c_l for t in a.learned]), 120)
     rbw_axis = np.logspace(-0.5, 3.0, 120)
     grid = np.array([[1.0 if final.policy(x, y).decision == OFFLOAD else 0.0 for x in rtt_axis] for y in rbw_axis])
-    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    fig, ax = plt.subplots(figsize=FIGURE_SIZE)
     ax.pcolormesh(rtt_axis * 1000, rbw_axis, grid, cmap='coolwarm_r', alpha=0.25, shading='auto', vmin=0, vmax=1)
     for label, colour in ((OFFLOAD, 'tab:blue'), (ONLOAD, 'tab:red')):
-        pts = [(t.c_l * 1000, t.r_bw) for t in learned if t.label == label]
+        pts = [(t.c_l * 1000, t.r_bw) for t in a.learned if t.label == label]
         if pts:
             ax.scatter(*zip(*pts), s=14, c=colour, label=f'label {label}')
     ax.set_yscale('log')
     ax.set_xlabel('C_l: RTT before the task [ms]')
     ax.set_ylabel('R_bw = A_bw / C_bw')
-    ax.set_title(f'Fig. 5-1: k-NN (k = {s.k}) decision map, {len(learned)} rows\n'
+    ax.set_title(f'Fig. 5-1: k-NN (k = {s.k}) decision map, {len(a.learned)} rows\n'
                  '(shaded blue: offload, red: onload)')
     ax.legend(loc='lower left', fontsize=8)
     fig.tight_layout()
-    fig.savefig(os.path.join(args.out, 'fig5_1_decision_map.png'), dpi=110)
-    plt.close(fig)
+    return fig
 
-    # ---- Fig. 5-2: T_task vs R_bw (offloaded, completed), power fit, crossing with CT
-    done_off = [r for r in offload_rows if r['mission_status'] == COMPLETED]
-    x = [_num(r, 'r_bw') for r in done_off]
-    y = [_num(r, 't_task') for r in done_off]
-    placing = [_num(r, 'placing_time') for r in offload_rows if _num(r, 'placing_time') > 0]
+
+@dataclass
+class Crossings:
+    """Where offloading matches CT: in R_bw (Fig. 5-2; also with the measured migration time) and in RTT (Fig. 5-4),
+    and the RTT from which remote move_base fails."""
+    r_bw: float
+    r_bw_with_migration: float
+    migration_time: float
+    rtt: float
+    fail_rtt: float
+
+
+def fig_time_vs_rbw(a: Analysis) -> Tuple[Any, float, float, float]:
+    """Fig. 5-2: T_task vs R_bw (offloaded, completed), power fit, crossing with CT; (figure, crossing, crossing with
+    the measured migration time, that time)."""
+    ct = a.control.ct_mean
+    x = [_num(r, 'r_bw') for r in a.done_off]
+    y = [_num(r, 't_task') for r in a.done_off]
+    placing = [_num(r, 'placing_time') for r in a.offload_rows if _num(r, 'placing_time') > 0]
     migration_time = statistics.median(placing) if placing else math.nan
     fit = core.power_fit(x, y)
     x_lo, x_hi = (min(x), max(x)) if x else (0.0, 0.0)
-    cross = core.crossing(fit, control.ct_mean, x_lo, x_hi) if fit else math.nan
-    cross_mig = core.crossing(fit, control.ct_mean - migration_time, x_lo, x_hi) \
+    cross = core.crossing(fit, ct, x_lo, x_hi) if fit else math.nan
+    cross_mig = core.crossing(fit, ct - migration_time, x_lo, x_hi) \
         if fit and math.isfinite(migration_time) else math.nan
-    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    fig, ax = plt.subplots(figsize=FIGURE_SIZE)
     ax.scatter(x, y, s=14, label='offloaded runs (completed)')
-    ax.axhline(control.ct_mean, color='k', ls='--', label=f'CT = {control.ct_mean:.1f} s (all local)')
+    ax.axhline(ct, color='k', ls='--', label=f'CT = {ct:.1f} s (all local)')
     if fit:
         xs = np.logspace(math.log10(max(min(x), 1e-3)), math.log10(max(x)), 100)
         ax.plot(xs, fit[0] * xs ** fit[1], 'tab:orange', label=f'T = {fit[0]:.1f} R_bw^{fit[1]:.3f}')
@@ -158,16 +228,17 @@ def write_analysis(args: argparse.Namespace) -> int:
                  f'with the measured migration {_fmt(migration_time)} s: {_fmt(cross_mig, 2)})', fontsize=8)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(os.path.join(args.out, 'fig5_2_time_vs_rbw.png'), dpi=110)
-    plt.close(fig)
+    return fig, cross, cross_mig, migration_time
 
-    # ---- Fig. 5-3: operating time (a full battery's worth of such tasks) vs R_bw
+
+def fig_operating_time(a: Analysis):
+    """Fig. 5-3: operating time (a full battery's worth of such tasks) vs R_bw."""
     def op_hours(r: Dict[str, str]) -> float:
         b = _num(r, 'b_task')
         return _num(r, 't_task') / b / 3600.0 if b > 0 else math.nan
-    fig, ax = plt.subplots(figsize=(6.4, 4.8))
-    ax.scatter([_num(r, 'r_bw') for r in done_off], [op_hours(r) for r in done_off], s=14, label='offloaded')
-    local_op = control.ct_mean / control.cb_mean / 3600.0
+    fig, ax = plt.subplots(figsize=FIGURE_SIZE)
+    ax.scatter([_num(r, 'r_bw') for r in a.done_off], [op_hours(r) for r in a.done_off], s=14, label='offloaded')
+    local_op = a.control.ct_mean / a.control.cb_mean / 3600.0
     ax.axhline(local_op, color='k', ls='--', label=f'all local: {local_op:.2f} h')
     ax.set_xscale('log')
     ax.set_xlabel('R_bw')
@@ -175,23 +246,27 @@ def write_analysis(args: argparse.Namespace) -> int:
     ax.set_title('Fig. 5-3: operating time vs R_bw')
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(os.path.join(args.out, 'fig5_3_operating_time.png'), dpi=110)
-    plt.close(fig)
+    return fig
 
-    # ---- Fig. 5-4: T_task vs RTT (offloaded), linear fit, crossing with CT; failure RTT
-    xr = [_num(r, 'c_l') * 1000 for r in done_off]
+
+def fig_time_vs_rtt(a: Analysis) -> Tuple[Any, float, float]:
+    """Fig. 5-4: T_task vs RTT (offloaded), linear fit, crossing with CT; (figure, crossing, failure RTT)."""
+    from cnr_mission.core.task import COMPLETED
+    ct = a.control.ct_mean
+    xr = [_num(r, 'c_l') * 1000 for r in a.done_off]
+    y = [_num(r, 't_task') for r in a.done_off]
     lin = core.linear_fit(xr, y)
-    cross_rtt = (control.ct_mean - lin[0]) / lin[1] if lin and lin[1] > 0 else math.nan
+    cross_rtt = (ct - lin[0]) / lin[1] if lin and lin[1] > 0 else math.nan
     if not (xr and min(xr) <= cross_rtt <= max(xr)):
         cross_rtt = math.nan            # not within the measured RTTs: no extrapolation
-    fail_rtt = core.failure_rtt([(_num(r, 'rtt_ms'), r['mission_status']) for r in offload_rows])
-    failed = [r for r in offload_rows if r['mission_status'] != COMPLETED]
-    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    fail_rtt = core.failure_rtt([(_num(r, 'rtt_ms'), r['mission_status']) for r in a.offload_rows])
+    failed = [r for r in a.offload_rows if r['mission_status'] != COMPLETED]
+    fig, ax = plt.subplots(figsize=FIGURE_SIZE)
     ax.scatter(xr, y, s=14, label='offloaded, completed')
     if failed:
         ax.scatter([_num(r, 'c_l') * 1000 for r in failed], [_num(r, 't_task') for r in failed], s=18, marker='x',
                    c='tab:red', label='offloaded, not completed')
-    ax.axhline(control.ct_mean, color='k', ls='--', label=f'CT = {control.ct_mean:.1f} s')
+    ax.axhline(ct, color='k', ls='--', label=f'CT = {ct:.1f} s')
     if lin:
         xs = np.linspace(0, max(xr + [1.0]), 50)
         ax.plot(xs, lin[0] + lin[1] * xs, 'tab:orange', label=f'T = {lin[0]:.1f} + {lin[1]:.3f} RTT')
@@ -201,21 +276,26 @@ def write_analysis(args: argparse.Namespace) -> int:
                  f'from {_fmt(fail_rtt, 0)} ms)', fontsize=8)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(os.path.join(args.out, 'fig5_4_time_vs_rtt.png'), dpi=110)
-    plt.close(fig)
+    return fig, cross_rtt, fail_rtt
 
-    # ---- Fig. 5-5 / 5-6: battery and time, local vs remote, under good links (RTT < 40 ms, >= 10 Mbit/s)
-    good = [p for p in pairs if p.rtt_ms < 40 and p.rate >= 10 and p.offload.mission_status == COMPLETED
+
+def good_link_pairs(a: Analysis) -> List[Any]:
+    """The pairs on good links (RTT < 40 ms, >= 10 Mbit/s) whose runs both completed (Figs. 5-5, 5-6)."""
+    from cnr_mission.core.task import COMPLETED
+    return [p for p in a.pairs if p.rtt_ms < 40 and p.rate >= 10 and p.offload.mission_status == COMPLETED
             and p.onload.mission_status == COMPLETED]
-    b_local = [p.onload.b_task for p in good]
-    b_remote = [p.offload.b_task for p in good]
-    t_local = [p.onload.t_task for p in good]
-    t_remote = [p.offload.t_task for p in good]
-    for name, loc, rem, unit, title in (('fig5_5_battery.png', b_local, b_remote, 'battery used [fraction]',
-                                         'Fig. 5-5: battery, local vs remote move_base'),
-                                        ('fig5_6_time.png', t_local, t_remote, 'T_task [s]',
-                                         'Fig. 5-6: task time, local vs remote move_base')):
-        fig, ax = plt.subplots(figsize=(6.4, 4.8))
+
+
+def figs_local_vs_remote(good: Sequence[Any]) -> Dict[str, Any]:
+    """Figs. 5-5 and 5-6: battery and time, local vs remote, per good-link pair."""
+    figures = {}
+    for name, key, unit, title in (('fig5_5_battery.png', 'b_task', 'battery used [fraction]',
+                                    'Fig. 5-5: battery, local vs remote move_base'),
+                                   ('fig5_6_time.png', 't_task', 'T_task [s]',
+                                    'Fig. 5-6: task time, local vs remote move_base')):
+        loc = [getattr(p.onload, key) for p in good]
+        rem = [getattr(p.offload, key) for p in good]
+        fig, ax = plt.subplots(figsize=FIGURE_SIZE)
         if loc:
             ax.plot(range(1, len(loc) + 1), loc, 'o-', label='local (onload)')
             ax.plot(range(1, len(rem) + 1), rem, 's-', label='remote (offload)')
@@ -224,45 +304,88 @@ def write_analysis(args: argparse.Namespace) -> int:
         ax.set_title(title)
         ax.legend(fontsize=8)
         fig.tight_layout()
-        fig.savefig(os.path.join(args.out, name), dpi=110)
-        plt.close(fig)
+        figures[name] = fig
+    return figures
 
-    def mean(v: Sequence[float]) -> float:
-        v = [a for a in v if math.isfinite(a)]
-        return statistics.mean(v) if v else math.nan
-    db = 100.0 * (mean(b_remote) - mean(b_local)) / mean(b_local) if b_local else math.nan
-    dt = mean(t_remote) - mean(t_local) if t_local else math.nan
 
-    # ---- campaign.md
-    last = curve[-1] if curve else None
-    within = [c for c in curve if c['rows'] <= 40]
-    at40 = within[-1] if within else None
-    last_p = curve_p[-1] if curve_p else None
-    within_p = [c for c in curve_p if c['rows'] <= 40]
-    at40_p = within_p[-1] if within_p else None
-    statuses = {}
+def _finite(v: Sequence[float]) -> List[float]:
+    return [a for a in v if math.isfinite(a)]
+
+
+def _mean(v: Sequence[float]) -> float:
+    v = _finite(v)
+    return statistics.mean(v) if v else math.nan
+
+
+def _median(v: Sequence[float]) -> float:
+    v = _finite(v)
+    return statistics.median(v) if v else math.nan
+
+
+def summary_text(a: Analysis) -> str:
+    """The paragraphs ahead of the tables: the command and the runs, the time budget, the runs by status and the
+    oracles."""
+    from network_monitor.core.evaluation import OFFLOAD
+    rows, pairs = a.rows, a.pairs
+    wall = sum(_num(r, 'wall_time') for r in rows if math.isfinite(_num(r, 'wall_time')))
+    unpaired = sorted({r['condition'] for r in rows} - {p.condition for p in pairs})
+    not_placed = sorted({r['id'] for r in rows if r.get('placed') == '0'})
+    statuses: Dict[Tuple[str, str], int] = {}
     for r in rows:
         statuses[(r['decision'], r['mission_status'])] = statuses.get((r['decision'], r['mission_status']), 0) + 1
-    wall = sum(_num(r, 'wall_time') for r in rows if math.isfinite(_num(r, 'wall_time')))
-    # where a paired condition's wall-clock time goes (runs with a decision: the task, placing, the rest)
-    def med(v: Sequence[float]) -> float:
-        v = [a for a in v if math.isfinite(a)]
-        return statistics.median(v) if v else math.nan
-    pair_wall = med([_num(p.offload_row, 'wall_time') + _num(p.onload_row, 'wall_time') for p in pairs])
+    either = sum(1 for o in a.oracle_noise if o == core.EITHER)
+    return '\n'.join([
+        f'{_command(a.args)}: {len(rows)} runs, {len(pairs)} paired conditions '
+        f'({a.n_train} training, {a.n_test} held out), {wall / 3600:.2f} h of runs; control values: CT '
+        f'{a.control.ct_mean:.2f} s, CB {a.control.cb_mean:.6f} ({a.control.runs} runs, {a.control.date}).'
+        + (f' Left out (--exclude): {", ".join(a.excluded)}.' if a.excluded else '')
+        + (f' Without a pair: {", ".join(unpaired)}' + (f' (a placement not made: {", ".join(not_placed)})'
+                                                        if not_placed else '') + '.' if unpaired else '') + '\n',
+        time_budget(a),
+        'Runs by placement and status: ' + ', '.join(f'{d} {s}: {n}' for (d, s), n in sorted(statuses.items()))
+        + '\n',
+        f'Oracle: strict = the pair\'s lower Eq. 4-5 value wins; noise-aware = a pair whose two values differ by '
+        f'≤ {a.tolerance:.3f} (two runs\' 95 % spread by the control runs\' sd) is "either" and any decision is right '
+        f'for it: {either} of {len(pairs)} pairs. Offload was the better placement in '
+        f'{sum(1 for o in a.oracle if o == OFFLOAD)} of {len(pairs)} pairs strictly, in '
+        f'{sum(1 for o in a.oracle_noise if o == OFFLOAD)} beyond the noise.\n'])
+
+
+def time_budget(a: Analysis) -> str:
+    """Where a paired condition's wall-clock time goes (runs with a decision: the task, placing, the rest), and the
+    elapsed time of the whole campaign."""
+    pair_wall = _median([_num(p.offload_row, 'wall_time') + _num(p.onload_row, 'wall_time') for p in a.pairs])
+
     def med_of(rs: Sequence[Dict[str, str]], key: str) -> str:
-        return _fmt(med([_num(r, key) for r in rs]))
-    budget = (f'Per paired condition (median over {len(pairs)}): {_fmt(pair_wall)} s of wall-clock time, i.e. 100 '
-              f'conditions in {_fmt(100 * pair_wall / 3600, 2)} h; onload run {med_of(onload_rows, "wall_time")} s '
-              f'(task {med_of(onload_rows, "t_task")} s), offload run {med_of(offload_rows, "wall_time")} s (task '
-              f'{med_of(offload_rows, "t_task")} s, placing {med_of(offload_rows, "placing_time")} s).')
-    elapsed = core.elapsed_time(all_rows)                 # every condition run, left out or not
-    n_run = len({r['condition'] for r in all_rows})
+        return _fmt(_median([_num(r, key) for r in rs]))
+    on, off = a.onload_rows, a.offload_rows
+    budget = (f'Per paired condition (median over {len(a.pairs)}): {_fmt(pair_wall)} s of wall-clock time, i.e. 100 '
+              f'conditions in {_fmt(100 * pair_wall / 3600, 2)} h; onload run {med_of(on, "wall_time")} s '
+              f'(task {med_of(on, "t_task")} s), offload run {med_of(off, "wall_time")} s (task '
+              f'{med_of(off, "t_task")} s, placing {med_of(off, "placing_time")} s).')
+    elapsed = core.elapsed_time(a.all_rows)               # every condition run, left out or not
+    n_run = len({r['condition'] for r in a.all_rows})
     if n_run and elapsed > 0:
         budget += (f" Elapsed from the first run's start to the last one's end, the evaluation and learning between "
                    f'runs included (the pause of a stopped and resumed campaign left out): {_fmt(elapsed / 3600, 2)} h '
                    f'for {n_run} conditions, {_fmt(elapsed / n_run)} s each, i.e. 100 in '
                    f'{_fmt(100 * elapsed / n_run / 3600, 2)} h.')
-    budget += '\n'
+    return budget + '\n'
+
+
+def _at_most_40(curve: Sequence[Dict]) -> Optional[Dict]:
+    within = [c for c in curve if c['rows'] <= 40]
+    return within[-1] if within else None
+
+
+def accuracy_table(a: Analysis) -> List[str]:
+    """The decisions against both oracles: online, k-NN and the best static threshold on the held-out conditions."""
+    from network_monitor.core.evaluation import OFFLOAD, ONLOAD
+    pairs, n_train, n_test = a.pairs, a.n_train, a.n_test
+
+    def agreeing(labels: Sequence[str], lo: int = 0) -> int:
+        return sum(1 for p, o in zip(pairs[lo:], labels[lo:]) if core.agrees(p.decided, o))
+
     def pct(k: int, n: int) -> str:
         return f'{k}/{n} ({_fmt(100 * k / max(n, 1), 0)} %)'
 
@@ -271,29 +394,15 @@ def write_analysis(args: argparse.Namespace) -> int:
 
     def acc(c: Optional[Dict], key: str) -> str:
         return f'{_fmt(100 * c[key], 0)} %' if c else '–'
-    paired_ids = {p.condition for p in pairs}
-    unpaired = sorted({r['condition'] for r in rows} - paired_ids)
-    not_placed = sorted({r['id'] for r in rows if r.get('placed') == '0'})
-    lines = [
-        f'# Continuous experiment (thesis §5)\n',
-        f'{_command(args)}: {len(rows)} runs, {len(pairs)} paired conditions '
-        f'({n_train} training, {n_test} held out), {wall / 3600:.2f} h of runs; control values: CT '
-        f'{control.ct_mean:.2f} s, CB {control.cb_mean:.6f} ({control.runs} runs, {control.date}).'
-        + (f' Left out (--exclude): {", ".join(excluded)}.' if excluded else '')
-        + (f' Without a pair: {", ".join(unpaired)}' + (f' (a placement not made: {", ".join(not_placed)})'
-                                                        if not_placed else '') + '.' if unpaired else '') + '\n',
-        budget,
-        'Runs by placement and status: ' + ', '.join(f'{d} {s}: {n}' for (d, s), n in sorted(statuses.items()))
-        + '\n',
-        f'Oracle: strict = the pair\'s lower Eq. 4-5 value wins; noise-aware = a pair whose two values differ by '
-        f'≤ {tolerance:.3f} (two runs\' 95 % spread by the control runs\' sd) is "either" and any decision is right '
-        f'for it: {either} of {len(pairs)} pairs. Offload was the better placement in '
-        f'{sum(1 for o in oracle if o == OFFLOAD)} of {len(pairs)} pairs strictly, in '
-        f'{sum(1 for o in oracle_noise if o == OFFLOAD)} beyond the noise.\n',
+    last, at40 = (a.curve[-1] if a.curve else None), _at_most_40(a.curve)
+    last_p, at40_p = (a.curve_p[-1] if a.curve_p else None), _at_most_40(a.curve_p)
+    oracle, oracle_noise = a.oracle, a.oracle_noise
+    return [
         '| measure | thesis | measured: strict oracle | noise-aware oracle |', '|---|---|---|---|',
-        f'| decisions the oracle agrees with, all conditions (online, as learned) | – | {pct(online, len(pairs))} | '
-        f'{pct(online_n, len(pairs))} |',
-        f'| same, held-out conditions only | – | {pct(online_late, n_test)} | {pct(online_late_n, n_test)} |',
+        f'| decisions the oracle agrees with, all conditions (online, as learned) | – | '
+        f'{pct(agreeing(oracle), len(pairs))} | {pct(agreeing(oracle_noise), len(pairs))} |',
+        f'| same, held-out conditions only | – | {pct(agreeing(oracle, n_train), n_test)} | '
+        f'{pct(agreeing(oracle_noise, n_train), n_test)} |',
         f'| k-NN accuracy on held-out, all {last["rows"] if last else 0} training rows | Eom et al. 87.5 % | '
         f'{acc(last, "knn")} | {acc(last, "knn_noise")} |',
         f'| k-NN accuracy with ≤ 40 rows ({at40["rows"] if at40 else 0} rows) | goal ≥ 90 % | {acc(at40, "knn")} | '
@@ -315,36 +424,65 @@ def write_analysis(args: argparse.Namespace) -> int:
         f'| best static threshold on the paired rows (RTT < '
         f'{_fmt(1000 * last_p["rule_rtt"], 0) if last_p else "–"} ms, R_bw > '
         f'{_fmt(last_p["rule_r_bw"], 2) if last_p else "–"}) | – | {acc(last_p, "static")} | '
-        f'{acc(last_p, "static_noise")} |',
-        '', '| measure | thesis | measured |', '|---|---|---|',
+        f'{acc(last_p, "static_noise")} |']
+
+
+def thesis_table(a: Analysis, crossings: Crossings, good: Sequence[Any]) -> List[str]:
+    """The figures' numbers beside the thesis's: crossings with CT, the failure RTT, local vs remote."""
+    ct, cb = a.control.ct_mean, a.control.cb_mean
+    y = [_num(r, 't_task') for r in a.done_off]
+    b_local, b_remote = [p.onload.b_task for p in good], [p.offload.b_task for p in good]
+    t_local, t_remote = [p.onload.t_task for p in good], [p.offload.t_task for p in good]
+    db = 100.0 * (_mean(b_remote) - _mean(b_local)) / _mean(b_local) if b_local else math.nan
+    dt = _mean(t_remote) - _mean(t_local) if t_local else math.nan
+    return [
+        '| measure | thesis | measured |', '|---|---|---|',
         f'| offloaded runs faster than CT / cheaper than CB | (thesis: above R_bw ≈ 4.9 / most runs) | '
-        f'{sum(1 for v in y if v < control.ct_mean)} of {len(y)} / '
-        f'{sum(1 for r in done_off if _num(r, "b_task") < control.cb_mean)} of {len(done_off)} |',
+        f'{sum(1 for v in y if v < ct)} of {len(y)} / '
+        f'{sum(1 for r in a.done_off if _num(r, "b_task") < cb)} of {len(a.done_off)} |',
         f'| Fig. 5-2: R_bw where offloading matches CT (– : no crossing within the measured R_bw) | ≈ 4.9 | '
-        f'{_fmt(cross, 2)} |',
-        f'| same, with the measured migration time ({_fmt(migration_time)} s, median placing time) | ≈ 10 (5 s) | '
-        f'{_fmt(cross_mig, 2)} |',
+        f'{_fmt(crossings.r_bw, 2)} |',
+        f'| same, with the measured migration time ({_fmt(crossings.migration_time)} s, median placing time) | '
+        f'≈ 10 (5 s) | {_fmt(crossings.r_bw_with_migration, 2)} |',
         f'| Fig. 5-4: RTT where offloading matches CT (– : none within the measured RTTs) | ≈ 55 ms | '
-        f'{_fmt(cross_rtt)} ms |',
-        f'| RTT from which remote move_base fails | ≈ 160 ms | {_fmt(fail_rtt, 0)} ms |',
+        f'{_fmt(crossings.rtt)} ms |',
+        f'| RTT from which remote move_base fails | ≈ 160 ms | {_fmt(crossings.fail_rtt, 0)} ms |',
         f'| Fig. 5-5: battery, remote vs local (good links, {len(good)} pairs) | −10 % | {_fmt(db)} % |',
-        f'| Fig. 5-6: task time, remote − local | −2.4 s | {_fmt(dt)} s |',
-        '',
-        'Learning curve (learning_curve.tsv): ' + ', '.join(
-            f'{c["rows"]} rows: k-NN {100 * c["knn"]:.0f} % / static {100 * c["static"]:.0f} % (noise-aware '
-            f'{100 * c["knn_noise"]:.0f} % / {100 * c["static_noise"]:.0f} %)' for c in curve),
-        '',
-        'Learning curve, paired labels (learning_curve_paired.tsv): ' + ', '.join(
-            f'{c["rows"]} rows: k-NN {100 * c["knn"]:.0f} % / static {100 * c["static"]:.0f} % (noise-aware '
-            f'{100 * c["knn_noise"]:.0f} % / {100 * c["static_noise"]:.0f} %)' for c in curve_p),
-        '',
-        'Figures: fig5_1_decision_map.png, fig5_2_time_vs_rbw.png, fig5_3_operating_time.png, '
-        'fig5_4_time_vs_rtt.png, fig5_5_battery.png, fig5_6_time.png.',
-    ]
-    if tw:
-        lines.append('\nTraining set warnings: ' + '; '.join(tw))
-    text = '\n'.join(lines) + '\n'
-    report.write_text(os.path.join(args.out, 'campaign.md'), text)
+        f'| Fig. 5-6: task time, remote − local | −2.4 s | {_fmt(dt)} s |']
+
+
+def curve_text(title: str, curve: Sequence[Dict]) -> str:
+    return f'{title}: ' + ', '.join(
+        f'{c["rows"]} rows: k-NN {100 * c["knn"]:.0f} % / static {100 * c["static"]:.0f} % (noise-aware '
+        f'{100 * c["knn_noise"]:.0f} % / {100 * c["static_noise"]:.0f} %)' for c in curve)
+
+
+def write_analysis(args: argparse.Namespace) -> int:
+    """The page README.md, the learning curves (TSV) and Figures 5-1 to 5-6 in ``args.out``."""
+    a = load_analysis(args)
+    if isinstance(a, int):
+        return a
+    figures = {'fig5_1_decision_map.png': fig_decision_map(a)}
+    figures['fig5_2_time_vs_rbw.png'], cross, cross_mig, migration_time = fig_time_vs_rbw(a)
+    figures['fig5_3_operating_time.png'] = fig_operating_time(a)
+    figures['fig5_4_time_vs_rtt.png'], cross_rtt, fail_rtt = fig_time_vs_rtt(a)
+    good = good_link_pairs(a)
+    figures.update(figs_local_vs_remote(good))
+    crossings = Crossings(cross, cross_mig, migration_time, cross_rtt, fail_rtt)
+    lines = [summary_text(a), *accuracy_table(a), '', *thesis_table(a, crossings, good), '',
+             curve_text('Learning curve (learning_curve.tsv)', a.curve), '',
+             curve_text('Learning curve, paired labels (learning_curve_paired.tsv)', a.curve_p), '',
+             'Figures: fig5_1_decision_map.png, fig5_2_time_vs_rbw.png, fig5_3_operating_time.png, '
+             'fig5_4_time_vs_rtt.png, fig5_5_battery.png, fig5_6_time.png.']
+    if a.training_warnings:
+        lines.append('\nTraining set warnings: ' + '; '.join(a.training_warnings))
+    slowdown = getattr(args, 'slowdown', None)
+    title = 'Continuous experiment ' + (f'at 1/{slowdown:g} robot CPU' if slowdown is not None
+                                        else 'at the default robot CPU cap')
+    text = results.write_page(args.out, title, 'thesis §5, Figs. 5-1 to 5-6', '\n'.join(lines) + '\n',
+                              _made_command(args), figures,
+                              {'learning_curve.tsv': learning_curve_table(a.curve),
+                               'learning_curve_paired.tsv': learning_curve_table(a.curve_p)})
     print(text, flush=True)
     return 0
 
@@ -355,12 +493,11 @@ THESIS_LR_TIME_S = -2.4             # remote - local task time (2.8 %)
 
 
 def write_local_remote(args: argparse.Namespace) -> int:
-    """local_remote.md, fig5_5_battery.png and fig5_6_time.png in ``args.out`` from the rows of each slowdown
+    """The page README.md, fig5_5_battery.png and fig5_6_time.png in ``args.out`` from the rows of each slowdown
     (``<out>/slowdown_<s>/results.tsv``): mean and sd per placement of the completed runs, as the thesis's
     Figs. 5-5/5-6 (bars with different local CPU frequency)."""
     from cnr_mission.core.task import read_results
     from network_monitor.core.evaluation import OFFLOAD, ONLOAD
-    from cnr_benchmarks.campaign import slowdown_dir
     table, bars = [], []
     for s in args.slowdowns:
         path = os.path.join(slowdown_dir(args.out, s), 'results.tsv')
@@ -383,6 +520,7 @@ def write_local_remote(args: argparse.Namespace) -> int:
                       f'{_fmt(db)} %'])
     if not bars:
         return 1
+    figures = {}
     for name, key, unit, title in (('fig5_5_battery.png', 2, 'battery used per task [fraction]',
                                     'Fig. 5-5: battery per task, local vs remote'),
                                    ('fig5_6_time.png', 1, 'T_task [s]', 'Fig. 5-6: task time, local vs remote')):
@@ -402,11 +540,9 @@ def write_local_remote(args: argparse.Namespace) -> int:
         ax.set_title(title + ' (mean, sd)')
         ax.legend(fontsize=8)
         fig.tight_layout()
-        fig.savefig(os.path.join(args.out, name), dpi=110)
-        plt.close(fig)
-    md = (f'# Local vs remote move_base (thesis Figs. 5-5, 5-6)\n\n'
-          f'`launch_scripts/exp_local_remote.sh {" ".join(args.argv)}` ({len(bars)} slowdown(s) with rows in '
-          f'`slowdown_<s>/results.tsv`, each with its `plan.yaml` and `session/`): {args.task}@{args.location}, the link '
+        figures[name] = fig
+    md = (f'{len(bars)} slowdown(s) with rows in `slowdown_<s>/results.tsv` (their plans and sessions in '
+          f'`{_shown(args.scratch)}/slowdown_<s>/`): {args.task}@{args.location}, the link '
           f'unrestricted, runs alternating local (every module on the robot) and remote (move_base migrated to '
           f'the cloud before the task), at each robot CPU slowdown (the robot\'s cgroup capped at 1/slowdown '
           f'CPU; the thesis compared local CPU frequencies). Mean (sd) of the completed runs.\n\n'
@@ -415,6 +551,6 @@ def write_local_remote(args: argparse.Namespace) -> int:
                                    'remote vs local B'], table)
           + f'\n\nThesis (20 runs each, unrestricted network, 1.6 GHz): remote {THESIS_LR_BATTERY_PCT:g} % battery, '
           f'{THESIS_LR_TIME_S:g} s (−2.8 %) task time.\n\nFigures: fig5_5_battery.png, fig5_6_time.png.\n')
-    report.write_text(os.path.join(args.out, 'local_remote.md'), md)
-    print(md, flush=True)
+    print(results.write_page(args.out, 'Local vs remote move_base on an unrestricted link', 'thesis Figs. 5-5, 5-6',
+                             md, f'launch_scripts/exp_local_remote.sh {" ".join(args.argv)}', figures), flush=True)
     return 0

@@ -1,7 +1,12 @@
-"""Migration downtime on the testbed (launch_scripts/bench_migration.sh; root).
+"""Migration downtime on the testbed (needs root).
 
-    /usr/bin/python3 -m cnr_benchmarks.migration_bench [--runs 10] [--rtts 0,50,100] [--modules ...]
-        [--modes cold,hot] [--cutoff-trials 3] [--out bench_results/migration] [--port 11411]
+    launch_scripts/bench_migration.sh [--runs 10] [--rtts 0,50,100] [--modules a,b] [--modes cold,hot]
+                                      [--cutoff-trials 3] [--settle 3] [--out DIR] [--port 11411]
+                                      [--config-dir DIR]   (default config/; e.g. a copy with robot_cpu off)
+                                      [--slowdown S]       (the robot capped at 1/S CPU, on a copy in the scratch)
+
+Uses the default testbed (robot/cloud namespaces), so run nothing else on it meanwhile. Takes about an hour with
+the defaults (cold migrations wait for the clone to start on the capped robot).
 
 Runs the two-host mission with ``--migration`` (every module of config/migration.yaml starts on the robot;
 corridor scenario with a long timeout so the robot keeps patrolling), a migration_probe on the robot (the
@@ -10,7 +15,9 @@ for each RTT (set as two one-way halves) x module x mode, ``--runs`` round trips
 ``migrate``. Hot migrations first start a standby on the target and wait until it is warm. Then, per module,
 ``--cutoff-trials`` times: the module on the cloud, the link cut, the time until the robot's instance is
 promoted and its output is back. At the end: measurements lost (merger's output vs the store) and goals
-aborted (move_base results). Writes results.tsv, failover.tsv (rows appended as measured), migration.md.
+aborted (move_base results). Writes docs/results/migration_hot/, migration_cold/ (by --modes; both:
+migration/) or DIR: results.tsv, failover.tsv and the page README.md; the rows as measured, the mission's report
+and logs and the probe's rows go to bench_results/<that experiment>/.
 """
 from __future__ import annotations
 
@@ -18,7 +25,6 @@ import argparse
 import datetime
 import json
 import os
-import platform
 import re
 import subprocess
 import sys
@@ -27,7 +33,8 @@ from typing import Dict, List, Optional
 
 import yaml
 
-from cnr_benchmarks import report
+from cnr_benchmarks import cli, report
+from cnr_benchmarks import results as results_page
 from migration_manager.cli import parse_placement
 from migration_manager.codes import ROLE_WORD
 from cnr_benchmarks.core.migration import (OUTPUT_TOPIC, Group, group_results, handover_downtime, handover_gap,
@@ -51,7 +58,7 @@ class Bench:
         from cnr_testbed.api import Testbed
         from cnr_testbed.rosside import RosSide
         self.args = args
-        self.out = os.path.abspath(args.out)
+        self.out = os.path.abspath(args.scratch)
         os.makedirs(self.out, exist_ok=True)
         self.cfg_dir = os.path.abspath(args.config_dir)
         self.tb = Testbed(os.path.join(self.cfg_dir, 'testbed.yaml'))
@@ -243,13 +250,13 @@ class Bench:
 
 
 def write_markdown(out: str, args: argparse.Namespace, results: List[Dict], failovers: List[Dict],
-                   summary: Dict, aborted: int, started: str, probe_file: str) -> None:
+                   summary: Dict, aborted: int, started: str, probe_file: str) -> str:
+    """The page README.md with results.tsv and failover.tsv in ``out``; returns the page."""
     from cnr_benchmarks.core.stats import percentile
     header = list(Group.HEADER)
     probe = read_probe(probe_file) if os.path.exists(probe_file) else []
     periods = {m: output_period(probe, m) for m in args.modules}
-    lines = [f'# Migration downtime ({started}, {platform.node()}, {os.cpu_count()} cores)', '',
-             f'`launch_scripts/bench_migration.sh {" ".join(args.argv)}`', '',
+    lines = [f'Started {started}.', '',
              'Downtime: the old instance closed its outputs (its frozen status\'s stamp) -> the first output of the '
              'new one arrives at the consumer on the robot (migration_probe; one clock for both hosts on the '
              'testbed). Consumer gap: last output of the old instance to the first of the new one, measured on the '
@@ -278,41 +285,55 @@ def write_markdown(out: str, args: argparse.Namespace, results: List[Dict], fail
     lines += ['', f'Measurements lost (merged measurements the mission monitor saw between the store\'s first and '
                   f'newest, missing from the active store at the end): {lost}; move_base goals aborted: {aborted}.',
               '']
-    report.write_text(os.path.join(out, 'migration.md'), '\n'.join(lines))
+    title = {('hot',): 'Hot migration downtime', ('cold',): 'Cold migration and failover'}.get(
+        tuple(args.modes), 'Migration downtime')
+    return results_page.write_page(out, title, 'thesis §4.2.5', '\n'.join(lines), args.command,
+                                   tables={'results.tsv': (COLUMNS, results),
+                                           'failover.tsv': (FAILOVER_COLUMNS, failovers)})
+
+
+def experiment(modes: List[str]) -> str:
+    """The results folder's name: migration_hot, migration_cold, or migration for a mixed run."""
+    return f'migration_{modes[0]}' if len(set(modes)) == 1 else 'migration'
 
 
 def main(argv: Optional[List[str]] = None) -> int:
-    ap = argparse.ArgumentParser(prog='bench_migration', description=__doc__.split('\n')[0])
+    ap = cli.Parser('bench_migration.sh', __doc__)
     ap.add_argument('--runs', type=int, default=10)
     ap.add_argument('--rtts', default='0,50,100')
     ap.add_argument('--modules', default='move_base,local_mapcell_manager,global_goal_manager,mfg')
     ap.add_argument('--modes', default='cold,hot')
     ap.add_argument('--cutoff-trials', type=int, default=3)
     ap.add_argument('--settle', type=float, default=3.0, help='s after each migration before the next')
-    ap.add_argument('--out', default=os.path.join(report.DEFAULT_OUT, 'migration'))
+    ap.add_argument('--out', default=None, help="the page's folder (default docs/results/migration_<mode>, or "
+                                                "migration for both modes)")
     ap.add_argument('--port', type=int, default=11411)
     ap.add_argument('--config-dir', default=os.path.join(report.WS, 'config'),
                     help='the configuration (e.g. a copy whose testbed.yaml turns the robot CPU cap off)')
     ap.add_argument('--slowdown', type=float, default=None,
-                    help='cap the robot at 1/S CPU on a copy of --config-dir in --out (as exp_campaign.sh --slowdown)')
+                    help='cap the robot at 1/S CPU on a copy of --config-dir in bench_results/<experiment> (as '
+                         'exp_campaign.sh --slowdown)')
     args = ap.parse_args(argv)
-    args.argv = list(argv if argv is not None else sys.argv[1:])
+    args.command = cli.command(ap, argv)
     args.modules = [m for m in args.modules.split(',') if m]
     args.modes = [m for m in args.modes.split(',') if m]
     bad = [m for m in args.modes if m not in ('cold', 'hot')] + [m for m in args.modules if m not in OUTPUT_TOPIC]
-    if bad:
-        print(f'bench_migration: unknown mode or module: {", ".join(bad)}', file=sys.stderr)
-        return 2
-    rtts = report.parse_rtts('bench_migration', args.rtts)
+    if bad or not args.modes:
+        ap.error(f'unknown mode or module: {", ".join(bad)}')
+    rtts = report.parse_rtts(ap.prog, args.rtts)
+    args.scratch = results_page.scratch_dir(experiment(args.modes))
+    args.out = os.path.abspath(args.out or results_page.results_dir(experiment(args.modes)))
     if args.slowdown is not None:
-        from cnr_benchmarks.campaign import slowdown_config, testbed_running
+        from cnr_benchmarks.session import slowdown_config, testbed_running
         if args.slowdown < 1.0:
-            print(f'bench_migration: --slowdown must be >= 1 (the robot gets 1/S CPU), got {args.slowdown:g}',
+            print(f'{ap.prog}: --slowdown must be >= 1 (the robot gets 1/S CPU), got {args.slowdown:g}',
                   file=sys.stderr)
             return 2
-        if testbed_running('bench_migration'):
+        cli.require_root(ap.prog, "the testbed's network namespaces and TUN devices")
+        if testbed_running(ap.prog):
             return 2
-        args.config_dir = slowdown_config(args.out, args.slowdown, args.config_dir)
+        args.config_dir = slowdown_config(args.scratch, args.slowdown, args.config_dir)
+    cli.require_root(ap.prog, "the testbed's network namespaces and TUN devices")
     started = datetime.datetime.now().strftime('%Y-%m-%d %H:%M')
     bench = Bench(args)
     results = report.TsvLog(os.path.join(bench.out, 'results.tsv'), COLUMNS)
@@ -343,8 +364,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     aborted = 0
     if os.path.exists(bench.probe_file):
         aborted = sum(1 for r in read_probe(bench.probe_file) if r.topic == '/move_base/result' and r.instance == '4')
-    write_markdown(bench.out, args, res, fo, summary, aborted, started, bench.probe_file)
-    report.progress(open(os.path.join(bench.out, 'migration.md')).read())
+    report.progress(write_markdown(args.out, args, res, fo, summary, aborted, started, bench.probe_file))
     return status
 
 

@@ -1,0 +1,86 @@
+"""The two-host task session the control, campaign and local-vs-remote experiments run (``two_host_mission
+--task-plan``), and the configuration copy that caps the robot's CPU at another slowdown."""
+from __future__ import annotations
+
+import argparse
+import os
+import subprocess
+import sys
+import time
+from typing import Dict, List, Optional
+
+import yaml
+
+from cnr_benchmarks import report
+from cnr_params.files import write_atomic
+
+
+def two_host_argv(location: str, report_dir: str, port: int, cfg_dir: Optional[str] = None) -> Optional[List[str]]:
+    """The two_host_mission command for the location's scenario with every module on the robot at the start
+    (the nodes' configuration from ``cfg_dir``, default the workspace's config/); None (the scenario's problem
+    printed in one line) when check_scenario refuses it."""
+    cfg_dir = cfg_dir or os.path.join(report.WS, 'config')
+    scenario = os.path.join(cfg_dir, 'scenarios', f'{location}.yaml')
+    line = subprocess.run(['rosrun', 'cnr_mission', 'check_scenario', scenario], capture_output=True, text=True)
+    if line.returncode != 0:
+        print(line.stderr.strip(), file=sys.stderr)
+        return None
+    _name, map_file, x, y, a = line.stdout.split()
+    return ['rosrun', 'cnr_mission', 'two_host_mission', '--config-dir', cfg_dir, '--scenario', scenario,
+            '--map', map_file, '--start', x, y, a, '--placement', 'all_robot', '--report-dir', report_dir,
+            '--port', str(port)]
+
+
+def run_session(args: argparse.Namespace, plan: Dict, results: str, training_dir: str, control_values: str,
+                scratch: Optional[str] = None, cfg_dir: Optional[str] = None) -> int:
+    """Write the plan and run the two-host task session over it in ``scratch`` (default ``args.scratch``; its
+    output passes through), its rows appended to ``results``."""
+    scratch = scratch or args.scratch
+    cfg_dir = cfg_dir or getattr(args, 'cfg_dir', None)
+    os.makedirs(scratch, exist_ok=True)
+    plan_path = os.path.join(scratch, 'plan.yaml')
+    write_atomic(plan_path, yaml.safe_dump(plan, sort_keys=False))
+    session = os.path.join(scratch, 'session')
+    if os.path.exists(session):
+        os.replace(session, f'{session}.prev{int(time.time())}')
+    argv = two_host_argv(plan['location'], session, args.port, cfg_dir)
+    if argv is None:
+        return 2
+    argv += ['--task-plan', plan_path, '--task-results', results, '--training-dir', training_dir,
+             '--control-values', control_values]
+    report.progress(f'[campaign] {len(plan["runs"])} runs of {plan["task"]}@{plan["location"]}; rows in {results}')
+    return report.call(argv)
+
+
+def slowdown_dir(out: str, slowdown: float) -> str:
+    return os.path.join(out, f'slowdown_{slowdown:g}')
+
+
+def slowdown_config(out: str, slowdown: float, src: Optional[str] = None) -> str:
+    """A copy of ``src`` (default the workspace's config/) whose testbed.yaml caps the robot at 1/``slowdown`` CPU
+    (the thesis's "different local CPU frequency"); rewritten on every run so it follows the configuration."""
+    import shutil
+    dst = os.path.join(slowdown_dir(out, slowdown), 'config')
+    src = os.path.abspath(src or os.path.join(report.WS, 'config'))
+    if src != os.path.abspath(dst):          # (a copy made before is only updated)
+        if os.path.exists(dst):
+            shutil.rmtree(dst)
+        shutil.copytree(src, dst)
+    path = os.path.join(dst, 'testbed.yaml')
+    with open(path) as f:
+        doc = yaml.safe_load(f)
+    doc['testbed']['robot_cpu'].update(enabled=True, slowdown=slowdown)
+    with open(path, 'w') as f:
+        yaml.safe_dump(doc, f, sort_keys=False)
+    return dst
+
+
+def testbed_running(prog: str) -> bool:
+    """True (said in one line) when a testbed is up: its robot cgroup keeps the cap it was made with, so a
+    ``--slowdown`` would not apply."""
+    from cnr_testbed.api import Testbed
+    if Testbed(os.path.join(report.WS, 'config', 'testbed.yaml')).running():
+        print(f'{prog}: a testbed is running and its robot CPU cap would be used instead of --slowdown\'s: stop it '
+              f'first (launch_scripts/testbed.sh down)', file=sys.stderr)
+        return True
+    return False
