@@ -134,7 +134,7 @@ class Agent:
 
     def _health(self) -> None:
         with self.lock:
-            msg = AgentHealth(host=self.host)
+            msg = AgentHealth(host=self.host, states=[])     # (a uint8[] field defaults to bytes)
             for s in self.slots.values():
                 alive = s.proc is not None and s.proc.alive()
                 msg.modules.append(s.module)
