@@ -3,7 +3,7 @@
 #
 # The user scripts are thin wrappers over one Python entry point each (cnr_python): the entry point parses
 # the options (its --help), resolves the master address, starts what it needs in process groups of its own
-# and stops them when it ends (cnr_bringup.script).
+# and stops them when it ends (cnr_harness.script).
 
 CNR_WS="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 

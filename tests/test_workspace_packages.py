@@ -189,3 +189,21 @@ def test_the_tracked_files_speak_of_the_product_not_of_its_history():
                 words.append(f'{name}:{number}: {line.strip()[:100]}')
     assert not words, 'history words in tracked files:\n' + '\n'.join(words)
     assert not stamps, 'history stamps in tracked file names:\n' + '\n'.join(stamps)
+
+
+def test_the_package_dependency_graph_has_no_cycle() -> None:
+    """The workspace's packages depend on each other without a cycle (ros_best_practices: an acyclic package graph)."""
+    graph = {pkg: _declared(path) & set(PACKAGES) for pkg, path in PACKAGES.items()}
+    state: Dict[str, int] = {}               # 1 on the current path, 2 done
+
+    def visit(pkg: str, path: list) -> None:
+        state[pkg] = 1
+        for dep in sorted(graph[pkg]):
+            assert state.get(dep) != 1, 'package dependency cycle: ' + ' -> '.join(path + [pkg, dep])
+            if dep not in state:
+                visit(dep, path + [pkg])
+        state[pkg] = 2
+
+    for pkg in sorted(graph):
+        if pkg not in state:
+            visit(pkg, [])

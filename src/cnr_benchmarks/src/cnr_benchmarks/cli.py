@@ -1,4 +1,4 @@
-"""What the bench/experiment entry points add to the user scripts' parser (:class:`cnr_bringup.script.Parser`,
+"""What the bench/experiment entry points add to the user scripts' parser (:class:`cnr_harness.script.Parser`,
 named after the launch_scripts wrapper that runs the entry point): the command line for a results page, the root
 check and the argument types they share.
 """
@@ -9,7 +9,7 @@ import os
 import sys
 from typing import List, Optional, Sequence
 
-from cnr_bringup.script import Parser
+from cnr_harness.script import Parser
 from cnr_params.config import EXIT_CONFIG
 
 __all__ = ['Parser', 'command', 'comma_list', 'positive_int', 'require_root']

@@ -15,7 +15,7 @@ import subprocess
 import sys
 from typing import List, Optional
 
-from cnr_bringup.script import WS, Parser, Processes, ScriptError, log, master_address, port_number, run
+from cnr_harness.script import WS, Parser, Processes, ScriptError, log, master_address, port_number, run
 
 PROG = 'bringup.sh'
 MAPS = ('corridor', 'datacenter')

@@ -12,7 +12,7 @@ import sys
 from typing import List, Optional
 
 from cnr_bringup.bringup import add_map_arguments, map_file, start_robot
-from cnr_bringup.script import WS, Parser, Processes, ScriptError, log, master_address, master_up, port_number, \
+from cnr_harness.script import WS, Parser, Processes, ScriptError, log, master_address, master_up, port_number, \
     run, setup_workspace
 
 PROG = 'run_demo.sh'

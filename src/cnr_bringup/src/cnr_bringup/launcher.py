@@ -24,9 +24,9 @@ import sys
 import threading
 from typing import List, Optional
 
+from cnr_harness.script import EXIT_INTERRUPTED
 from cnr_params.config import EXIT_CONFIG   # a node's one-line configuration error
 
-EXIT_INTERRUPTED = 130
 # roslaunch's lines that say nothing to a person watching a run (the parameter summary, blank lines)
 NOISE = re.compile(r'^( \* /|\s*$|.*rosdep view is empty)')
 

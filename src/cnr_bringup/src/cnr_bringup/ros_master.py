@@ -9,7 +9,7 @@ import os
 import sys
 from typing import List, Optional
 
-from cnr_bringup.script import Parser, Processes, ScriptError, log, master_address, master_up, port_number, run
+from cnr_harness.script import Parser, Processes, ScriptError, log, master_address, master_up, port_number, run
 
 PROG = 'ros_master.sh'
 

@@ -22,11 +22,12 @@ import subprocess
 import sys
 from typing import Callable, List, NoReturn, Optional, Sequence, Tuple
 
-from cnr_bringup.launcher import EXIT_INTERRUPTED
 from cnr_harness import WaitTimeout, master_answers, stop_process, wait_until
 from cnr_params.config import EXIT_CONFIG
 
-# the workspace (this file is <ws>/src/cnr_bringup/src/cnr_bringup/script.py)
+EXIT_INTERRUPTED = 130             # the status of a run stopped by Ctrl-C (128 + SIGINT), as a shell reports it
+
+# the workspace (this file is <ws>/src/cnr_harness/src/cnr_harness/script.py)
 WS = os.path.abspath(os.path.join(os.path.dirname(__file__), '..', '..', '..', '..'))
 DEFAULT_MASTER_URI = 'http://localhost:11311'
 MASTER_START_TIMEOUT = 20.0         # s a started roscore has to answer

@@ -40,7 +40,7 @@ import time
 from typing import List, Optional, Tuple
 
 from cnr_bringup.launcher import EXIT_INTERRUPTED, NOISE
-from cnr_bringup.script import WS, Interrupted, Parser, Processes, ScriptError, log, master_address, master_up, \
+from cnr_harness.script import WS, Interrupted, Parser, Processes, ScriptError, log, master_address, master_up, \
     port_number, run, setup_workspace
 from cnr_mission.options import DEFAULT_TASK, EXIT_NOT_FOUND, add_link_arguments, add_migration_arguments
 from cnr_params.config import EXIT_CONFIG

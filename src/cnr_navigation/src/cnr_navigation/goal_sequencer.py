@@ -19,7 +19,7 @@ from dataclasses import dataclass
 from typing import List, Optional
 
 import cnr_params
-from cnr_bringup.script import WS, Parser, Processes, ScriptError, master_address, master_up, port_number, run
+from cnr_harness.script import WS, Parser, Processes, ScriptError, master_address, master_up, port_number, run
 from cnr_params import ConfigError, Section
 from cnr_runtime import init_node
 

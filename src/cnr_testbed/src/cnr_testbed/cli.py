@@ -19,7 +19,7 @@ import os
 import sys
 import time
 
-from cnr_bringup.script import WS, Parser
+from cnr_harness.script import WS, Parser
 from cnr_params import ConfigError
 
 

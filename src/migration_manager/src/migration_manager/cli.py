@@ -18,7 +18,7 @@ from typing import Dict, List, Optional
 
 import rospy
 
-from cnr_bringup.script import Parser, ScriptError, master_address, master_up, port_number
+from cnr_harness.script import Parser, ScriptError, master_address, master_up, port_number
 from cnr_msgs.msg import Placement
 from cnr_msgs.srv import Migrate, MigrateResponse
 from migration_manager.codes import MODE, OUTCOME_WORD, TARGET
