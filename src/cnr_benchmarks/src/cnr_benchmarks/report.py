@@ -8,7 +8,7 @@ import signal
 import subprocess
 import sys
 import tempfile
-from typing import Dict, Iterable, List, Sequence
+from typing import IO, Dict, Iterable, List, Optional, Sequence
 
 from cnr_benchmarks.results import WS, results_dir, scratch_dir
 
@@ -64,10 +64,11 @@ def stop_on_signals() -> None:
     signal.signal(signal.SIGINT, _interrupt)
 
 
-def call(argv: Sequence[str]) -> int:
-    """subprocess.call, except that an interrupt stops the child with SIGTERM and waits for its clean-up
-    (subprocess.call sends SIGKILL, which leaves a testbed's namespaces and processes behind)."""
-    child = subprocess.Popen(list(argv))
+def call(argv: Sequence[str], output: Optional[IO] = None) -> int:
+    """subprocess.call (its stdout and stderr to ``output`` if given), except that an interrupt stops the child
+    with SIGTERM and waits for its clean-up (subprocess.call sends SIGKILL, which leaves a testbed's namespaces
+    and processes behind)."""
+    child = subprocess.Popen(list(argv), stdout=output, stderr=subprocess.STDOUT if output else None)
     try:
         return child.wait()
     except KeyboardInterrupt:

@@ -158,17 +158,21 @@ def write_outputs(out: str, runs: Sequence[Run], command: str) -> str:
             '\t'.join('' if v is None else str(v) for v in r.values()) + '\n' for r in rows))
         plot(runs, os.path.join(out, 'deadzone.png'))
     md = '\n'.join(['# Dead-zone experiment (thesis Appendix VI, Fig. 11)', '', f'Command: `{command}`', '',
-                    'Corridor 2 m × 12 m, heaters at x = 8.3 and 8.9 m by the upper wall, Wi-Fi only for x ≤ 1.5 m '
-                    'and 10 ≤ x ≤ 11.5 m (config/link_map_corridor.yaml: both directions cut in between; '
-                    'link_map_corridor_uplink.yaml: robot → cloud only), global goal manager on the cloud sending '
-                    'the Z route (coverage_sweep), 50 measurements (16 s) after the hotspot, real time. Time from '
-                    'the start of the run; "idle" = the MFG received no measurement or waited for a global goal '
-                    '(mfg/activity), or its reports no longer reached the robot at the end (cut off). '
-                    'Median (IQR, range, n).', '', table(runs), '',
-                    '![temperature vs measurement number](deadzone.png)', ''])
-    with open(os.path.join(out, 'deadzone.md'), 'w') as f:
-        f.write(md)
+                    page_body(runs)])
+    write_atomic(os.path.join(out, 'deadzone.md'), md)
     return md
+
+
+def page_body(runs: Sequence[Run]) -> str:
+    """The set-up, the table of the runs and the plot (deadzone.png) in markdown."""
+    return '\n'.join(['Corridor 2 m × 12 m, heaters at x = 8.3 and 8.9 m by the upper wall, Wi-Fi only for x ≤ 1.5 m '
+                      'and 10 ≤ x ≤ 11.5 m (config/link_map_corridor.yaml: both directions cut in between; '
+                      'link_map_corridor_uplink.yaml: robot → cloud only), global goal manager on the cloud sending '
+                      'the Z route (coverage_sweep), 50 measurements (16 s) after the hotspot, real time. Time from '
+                      'the start of the run; "idle" = the MFG received no measurement or waited for a global goal '
+                      '(mfg/activity), or its reports no longer reached the robot at the end (cut off). '
+                      'Median (IQR, range, n).', '', table(runs), '',
+                      '![temperature vs measurement number](deadzone.png)', ''])
 
 
 def main(argv: Optional[List[str]] = None) -> int:

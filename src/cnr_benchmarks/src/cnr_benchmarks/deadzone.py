@@ -1,0 +1,110 @@
+"""The paper's dead-zone experiment (thesis Appendix VI, Fig. 10-11), on the testbed (root).
+
+    launch_scripts/exp_deadzone.sh [--runs N] [--modes normal,network_aware[,normal_uplink]] [--out DIR] [--fresh]
+
+The corridor (config/scenarios/deadzone.yaml: 2 m x 12 m, a pair of heaters, the global goal module's Z
+route) with Wi-Fi only near both ends (the link follows the robot's position); N runs per mode (default 5),
+alternating (default modes normal and network_aware):
+  normal         GG and MFG on the cloud (placement paper_normal), dead zone cuts both directions
+                 (config/link_map_corridor.yaml)
+  network_aware  GG on the cloud, MFG on the robot (paper_network_aware), the same dead zone
+  normal_uplink  as normal, but the dead zone cuts robot -> cloud only (config/link_map_corridor_uplink.yaml):
+                 the paper's own description of its normal run ("sensor data does not reach the MFG")
+Each run is a real-time two-host mission (run_mission.sh --two-host) with its report in
+bench_results/deadzone/runs/<mode>-<i>/ and its output in bench_results/deadzone/runs/<mode>-<i>.log.
+Resumable: a run whose summary.json exists is kept (--fresh starts over). Then docs/results/deadzone/ (or DIR):
+runs.tsv, the page README.md (time and measurements to the hotspot, median and spread, beside the paper's ~100
+measurements / ~33 s; the MFG's longest idle time) and deadzone.png (temperature vs measurement number, the
+paper's plot). About 2 minutes per run.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+import time
+from typing import List, Optional
+
+from cnr_benchmarks import cli, report, results
+from cnr_mission.core import deadzone
+
+EXPERIMENT = 'deadzone'
+RUN_MISSION = os.path.join(results.WS, 'launch_scripts', 'run_mission.sh')
+EXIT_INTERRUPTED = 130
+MISSION_ENDED = (0, 3)          # run_mission's statuses of a mission that ended with its report (3: timed out)
+
+
+def run_one(mode: str, folder: str) -> int:
+    """One two-host mission of ``mode`` with its report in ``folder`` and its output in ``<folder>.log``; returns
+    its exit status (a run that failed leaves no summary.json behind)."""
+    placement, link_map = deadzone.MODES[mode]
+    shutil.rmtree(folder, ignore_errors=True)
+    os.makedirs(os.path.dirname(folder), exist_ok=True)
+    with open(f'{folder}.log', 'w') as log:
+        status = report.call([RUN_MISSION, '--two-host', '--scenario', 'deadzone', '--placement',
+                              placement, '--link-map', os.path.join(results.WS, 'config', link_map),
+                              '--report-dir', folder], log)
+    if status == EXIT_INTERRUPTED:
+        raise KeyboardInterrupt
+    if status not in MISSION_ENDED:
+        summary = os.path.join(folder, 'summary.json')
+        if os.path.exists(summary):
+            os.remove(summary)
+    return status
+
+
+def last_result_line(log_path: str) -> str:
+    """The mission's last 'hotspot found in' or 'timeout after' line, or ''."""
+    with open(log_path, errors='replace') as f:
+        lines = [ln.rstrip('\n') for ln in f if 'hotspot found in' in ln or 'timeout after' in ln]
+    return lines[-1] if lines else ''
+
+
+def main(argv: Optional[List[str]] = None) -> int:
+    ap = cli.Parser('exp_deadzone.sh', __doc__)
+    ap.add_argument('--runs', type=cli.positive_int, default=5, help='runs per mode (default %(default)s)')
+    ap.add_argument('--modes', type=cli.comma_list(list(deadzone.MODES)), default='normal,network_aware',
+                    help='comma-separated modes (default %(default)s)')
+    ap.add_argument('--out', default=results.results_dir(EXPERIMENT), help="the page's folder (default %(default)s)")
+    ap.add_argument('--fresh', action='store_true', help='start over: the runs made before are removed')
+    args = ap.parse_args(argv)
+    cli.require_root(ap.prog, 'the testbed: network namespaces, TUN devices, cgroups')
+    scratch = results.scratch_dir(EXPERIMENT)
+    if args.fresh:
+        shutil.rmtree(os.path.join(scratch, 'runs'), ignore_errors=True)
+    total, done, t0 = len(args.modes) * args.runs, 0, time.monotonic()
+    for i in range(1, args.runs + 1):
+        for mode in args.modes:
+            folder = deadzone.run_folder(scratch, mode, i)
+            done += 1
+            if os.path.exists(os.path.join(folder, 'summary.json')):
+                report.progress(f'[{ap.prog}] [{done}/{total}] {mode} run {i}: done before, kept')
+                continue
+            report.progress(f'[{ap.prog}] [{done}/{total}] {mode} run {i} ({deadzone.MODES[mode][0]}), '
+                            f'{time.monotonic() - t0:.0f} s so far')
+            status = run_one(mode, folder)
+            if status in MISSION_ENDED:
+                report.progress(last_result_line(f'{folder}.log'))
+            else:
+                report.progress(f'[{ap.prog}] {mode} run {i} failed (status {status}; see {folder}.log)')
+    runs = [r for m in args.modes for i in range(1, args.runs + 1)
+            for r in [deadzone.load_run(deadzone.run_folder(scratch, m, i), m, i)] if r is not None]
+    os.makedirs(args.out, exist_ok=True)
+    rows = [r.row() for r in runs]
+    if rows:
+        deadzone.plot(runs, os.path.join(args.out, 'deadzone.png'))
+    page = results.write_page(args.out, "The paper's dead-zone experiment", 'thesis Appendix VI, Fig. 11',
+                              deadzone.page_body(runs), cli.command(ap, argv),
+                              tables={'runs.tsv': (list(rows[0]) if rows else [], rows)})
+    print(page)
+    report.progress(f'[{ap.prog}] done in {time.monotonic() - t0:.0f} s: {args.out}/README.md, deadzone.png, runs.tsv')
+    return 0
+
+
+if __name__ == '__main__':
+    report.stop_on_signals()
+    try:
+        sys.exit(main())
+    except KeyboardInterrupt:
+        print('interrupted: the finished runs are kept; run the same command again to resume', file=sys.stderr)
+        sys.exit(EXIT_INTERRUPTED)
