@@ -165,6 +165,17 @@ def learning_curve_table(curve: Sequence[Dict]) -> Tuple[Sequence[str], List[Lis
     return LEARNING_CURVE_KEYS, [[str(c[k]) for k in LEARNING_CURVE_KEYS] for c in curve]
 
 
+def _finish(fig, ax, xlabel: str, ylabel: str, title: str, title_size: Optional[float] = None,
+            legend_loc: Optional[str] = None):
+    """Label a figure's axes, title and legend (small) and lay it out; returns the figure."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, **({'fontsize': title_size} if title_size else {}))
+    ax.legend(fontsize=8, **({'loc': legend_loc} if legend_loc else {}))
+    fig.tight_layout()
+    return fig
+
+
 def fig_decision_map(a: Analysis):
     """Fig. 5-1: the k-NN decision map over (RTT, R_bw) with the learned rows."""
     from network_monitor.core.decision import Decider, DecisionSettings, Exploration
@@ -182,13 +193,9 @@ def fig_decision_map(a: Analysis):
         if pts:
             ax.scatter(*zip(*pts), s=14, c=colour, label=f'label {label}')
     ax.set_yscale('log')
-    ax.set_xlabel('C_l: RTT before the task [ms]')
-    ax.set_ylabel('R_bw = A_bw / C_bw')
-    ax.set_title(f'Fig. 5-1: k-NN (k = {s.k}) decision map, {len(a.learned)} rows\n'
-                 '(shaded blue: offload, red: onload)')
-    ax.legend(loc='lower left', fontsize=8)
-    fig.tight_layout()
-    return fig
+    return _finish(fig, ax, 'C_l: RTT before the task [ms]', 'R_bw = A_bw / C_bw',
+                   f'Fig. 5-1: k-NN (k = {s.k}) decision map, {len(a.learned)} rows\n(shaded blue: offload, red: onload)',
+                   legend_loc='lower left')
 
 
 @dataclass
@@ -222,12 +229,8 @@ def fig_time_vs_rbw(a: Analysis) -> Tuple[Any, float, float, float]:
         xs = np.logspace(math.log10(max(min(x), 1e-3)), math.log10(max(x)), 100)
         ax.plot(xs, fit[0] * xs ** fit[1], 'tab:orange', label=f'T = {fit[0]:.1f} R_bw^{fit[1]:.3f}')
     ax.set_xscale('log')
-    ax.set_xlabel('R_bw')
-    ax.set_ylabel('T_task [s]')
-    ax.set_title(f'Fig. 5-2: task time vs R_bw (crossing with CT: {_fmt(cross, 2)}; '
-                 f'with the measured migration {_fmt(migration_time)} s: {_fmt(cross_mig, 2)})', fontsize=8)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
+    _finish(fig, ax, 'R_bw', 'T_task [s]', f'Fig. 5-2: task time vs R_bw (crossing with CT: {_fmt(cross, 2)}; '
+            f'with the measured migration {_fmt(migration_time)} s: {_fmt(cross_mig, 2)})', title_size=8)
     return fig, cross, cross_mig, migration_time
 
 
@@ -241,12 +244,8 @@ def fig_operating_time(a: Analysis):
     local_op = a.control.ct_mean / a.control.cb_mean / 3600.0
     ax.axhline(local_op, color='k', ls='--', label=f'all local: {local_op:.2f} h')
     ax.set_xscale('log')
-    ax.set_xlabel('R_bw')
-    ax.set_ylabel('operating time on a full battery [h] (T_task / B_task)')
-    ax.set_title('Fig. 5-3: operating time vs R_bw')
-    ax.legend(fontsize=8)
-    fig.tight_layout()
-    return fig
+    return _finish(fig, ax, 'R_bw', 'operating time on a full battery [h] (T_task / B_task)',
+                   'Fig. 5-3: operating time vs R_bw')
 
 
 def fig_time_vs_rtt(a: Analysis) -> Tuple[Any, float, float]:
@@ -270,12 +269,8 @@ def fig_time_vs_rtt(a: Analysis) -> Tuple[Any, float, float]:
     if lin:
         xs = np.linspace(0, max(xr + [1.0]), 50)
         ax.plot(xs, lin[0] + lin[1] * xs, 'tab:orange', label=f'T = {lin[0]:.1f} + {lin[1]:.3f} RTT')
-    ax.set_xlabel('C_l: RTT [ms]')
-    ax.set_ylabel('T_task [s]')
-    ax.set_title(f'Fig. 5-4: task time vs RTT (crossing with CT {_fmt(cross_rtt)} ms; remote move_base fails '
-                 f'from {_fmt(fail_rtt, 0)} ms)', fontsize=8)
-    ax.legend(fontsize=8)
-    fig.tight_layout()
+    _finish(fig, ax, 'C_l: RTT [ms]', 'T_task [s]', f'Fig. 5-4: task time vs RTT (crossing with CT {_fmt(cross_rtt)} '
+            f'ms; remote move_base fails from {_fmt(fail_rtt, 0)} ms)', title_size=8)
     return fig, cross_rtt, fail_rtt
 
 
@@ -299,12 +294,7 @@ def figs_local_vs_remote(good: Sequence[Any]) -> Dict[str, Any]:
         if loc:
             ax.plot(range(1, len(loc) + 1), loc, 'o-', label='local (onload)')
             ax.plot(range(1, len(rem) + 1), rem, 's-', label='remote (offload)')
-        ax.set_xlabel('paired condition (RTT < 40 ms, rate >= 10 Mbit/s)')
-        ax.set_ylabel(unit)
-        ax.set_title(title)
-        ax.legend(fontsize=8)
-        fig.tight_layout()
-        figures[name] = fig
+        figures[name] = _finish(fig, ax, 'paired condition (RTT < 40 ms, rate >= 10 Mbit/s)', unit, title)
     return figures
 
 

@@ -12,13 +12,22 @@ from typing import List, Optional, Sequence
 from cnr_harness.script import Parser
 from cnr_params.config import EXIT_CONFIG
 
-__all__ = ['Parser', 'command', 'comma_list', 'positive_int', 'require_root']
+__all__ = ['Parser', 'command', 'comma_list', 'positive_int', 'require_root', 'sim_part_parser']
 
 
 def command(ap: argparse.ArgumentParser, argv: Optional[Sequence[str]]) -> str:
     """The command line as typed (for a results page): ``launch_scripts/<script>`` and its arguments."""
     from cnr_benchmarks.results import command_line
     return command_line(f'launch_scripts/{ap.prog}', list(sys.argv[1:] if argv is None else argv))
+
+
+def sim_part_parser(doc: str, json_name: str) -> argparse.ArgumentParser:
+    """The parser of one part of bench_sim.sh (run by cnr_benchmarks.sim_suite): ``--out``, the part's JSON,
+    default ``bench_results/sim/<json_name>``."""
+    from cnr_benchmarks.results import scratch_dir
+    ap = argparse.ArgumentParser(description=doc.split('\n')[0])
+    ap.add_argument('--out', default=os.path.join(scratch_dir('sim'), json_name), help='default %(default)s')
+    return ap
 
 
 def require_root(prog: str, why: str) -> None:

@@ -17,7 +17,6 @@ and writes them as JSON (name, value, unit, target), as the other benchmarks of 
 """
 from __future__ import annotations
 
-import argparse
 import os
 import shutil
 import tempfile
@@ -29,7 +28,8 @@ from typing import Dict, List, Tuple
 import psutil
 import yaml
 
-from cnr_benchmarks.results import WS, save_json, scratch_dir
+from cnr_benchmarks.cli import sim_part_parser
+from cnr_benchmarks.results import WS, save_json
 from cnr_harness import RosMaster, wait_until
 
 TOPIC = 'camera/depth/points'
@@ -100,8 +100,7 @@ def run(master: RosMaster, rospy, config_dir: str, seconds: float, warmup: float
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--out', default=os.path.join(scratch_dir('sim'), 'depth.json'))
+    ap = sim_part_parser(__doc__, 'depth.json')
     ap.add_argument('--seconds', type=float, default=30.0, help='wall seconds measured per run')
     ap.add_argument('--warmup', type=float, default=5.0, help='wall seconds before each measurement')
     args = ap.parse_args()

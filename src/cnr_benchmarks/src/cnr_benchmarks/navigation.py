@@ -8,7 +8,6 @@ Uses the TurtleBot configuration as the move_base node reads it from config/navi
 """
 from __future__ import annotations
 
-import argparse
 import math
 import os
 import statistics
@@ -16,7 +15,8 @@ import time
 
 import numpy as np
 
-from cnr_benchmarks.results import WS, save_json, scratch_dir
+from cnr_benchmarks.cli import sim_part_parser
+from cnr_benchmarks.results import WS, save_json
 from cnr_navigation.core.costmap import GridGeometry, LayeredCostmap, scan_to_observation
 from cnr_navigation.core.dwa import DWAController
 from cnr_navigation.core.geometry import Pose2D, quaternion_to_matrix
@@ -96,8 +96,7 @@ def depth_times(n: int) -> list:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--out', default=os.path.join(scratch_dir('sim'), 'navigation.json'))
+    ap = sim_part_parser(__doc__, 'navigation.json')
     ap.add_argument('--runs', type=int, default=20)
     args = ap.parse_args()
     results = []

@@ -6,13 +6,13 @@ Prints one line per figure and writes them as JSON (name, value, unit, target).
 """
 from __future__ import annotations
 
-import argparse
 import os
 import time
 
 import numpy as np
 
-from cnr_benchmarks.results import WS, save_json, scratch_dir
+from cnr_benchmarks.cli import sim_part_parser
+from cnr_benchmarks.results import WS, save_json
 from cnr_harness import RosMaster, wait_until
 from cnr_maps.mapio import load_map
 from cnr_maps.pose import Pose2D
@@ -79,8 +79,7 @@ def ros_rtf(wall_seconds: float) -> float:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--out', default=os.path.join(scratch_dir('sim'), 'sim.json'))
+    ap = sim_part_parser(__doc__, 'sim.json')
     ap.add_argument('--sim-seconds', type=float, default=600.0, help='simulated seconds per core run')
     ap.add_argument('--ros-seconds', type=float, default=20.0, help='wall seconds of the ROS I/O run')
     args = ap.parse_args()

@@ -9,7 +9,6 @@ master is counted. Start-up = process start until its ``move_base`` action serve
 """
 from __future__ import annotations
 
-import argparse
 import collections
 import os
 import threading
@@ -18,7 +17,8 @@ import xmlrpc.client
 from socketserver import ThreadingMixIn
 from xmlrpc.server import SimpleXMLRPCRequestHandler, SimpleXMLRPCServer
 
-from cnr_benchmarks.results import WS, save_json, scratch_dir
+from cnr_benchmarks.cli import sim_part_parser
+from cnr_benchmarks.results import WS, save_json
 from cnr_harness import RosMaster, wait_until
 from cnr_navigation.core.param_files import navigation_tree
 
@@ -92,8 +92,7 @@ def audit(timeout: float = 120.0) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--out', default=os.path.join(scratch_dir('sim'), 'move_base_startup.json'))
+    ap = sim_part_parser(__doc__, 'move_base_startup.json')
     args = ap.parse_args()
     result = audit()
     print(f"move_base start-up: {result['startup_seconds']:.2f} s, {result['parameter_calls']} parameter calls, "
