@@ -84,3 +84,17 @@ def test_tsv_and_json(tmp_path, capsys):
 def test_folders():
     assert results.results_dir('campaign_slowdown4.5', '/ws') == '/ws/docs/results/campaign_slowdown4.5'
     assert results.scratch_dir('deadzone', '/ws') == '/ws/bench_results/deadzone'
+
+
+def test_page_with_figure_and_tables(tmp_path):
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1])
+    out = tmp_path / 'startup'
+    results.write_page(str(out), 'T', 'R', '![x](x.png)', 'x.sh', {'x.png': fig},
+                       {'rows.tsv': (['a', 'b'], [{'a': 1, 'b': 2.0}, [3, None]])}, ws=str(tmp_path))
+    assert (out / 'x.png').read_bytes().startswith(b'\x89PNG')
+    assert (out / 'rows.tsv').read_text() == 'a\tb\n1\t2.000\n3\t\n'
+    assert sorted(os.listdir(out)) == ['README.md', 'rows.tsv', 'x.png']

@@ -285,9 +285,10 @@ def write_markdown(out: str, args: argparse.Namespace, results: List[Dict], fail
     lines += ['', f'Measurements lost (merged measurements the mission monitor saw between the store\'s first and '
                   f'newest, missing from the active store at the end): {lost}; move_base goals aborted: {aborted}.',
               '']
-    title = {('hot',): 'Hot migration downtime', ('cold',): 'Cold migration and failover'}.get(
-        tuple(args.modes), 'Migration downtime')
-    return results_page.write_page(out, title, 'thesis §4.2.5', '\n'.join(lines), args.command,
+    title, reference = {('hot',): ('Hot migration downtime', 'thesis §4.2.5, method 2: hot-standby proxy'),
+                        ('cold',): ('Cold migration and failover', 'thesis §4.2.5, method 1: stop and clone')}.get(
+        tuple(sorted(set(args.modes))), ('Migration downtime and failover', 'thesis §4.2.5'))
+    return results_page.write_page(out, title, reference, '\n'.join(lines), args.command,
                                    tables={'results.tsv': (COLUMNS, results),
                                            'failover.tsv': (FAILOVER_COLUMNS, failovers)})
 
