@@ -194,7 +194,8 @@ def fig_decision_map(a: Analysis):
             ax.scatter(*zip(*pts), s=14, c=colour, label=f'label {label}')
     ax.set_yscale('log')
     return _finish(fig, ax, 'C_l: RTT before the task [ms]', 'R_bw = A_bw / C_bw',
-                   f'Fig. 5-1: k-NN (k = {s.k}) decision map, {len(a.learned)} rows\n(shaded blue: offload, red: onload)',
+                   f'Fig. 5-1: k-NN (k = {s.k}) decision map, {len(a.learned)} rows\n'
+                   '(shaded blue: offload, red: onload)',
                    legend_loc='lower left')
 
 

@@ -151,7 +151,8 @@ def write_outputs(tsv: str, out_dir: str, command: str, started: datetime.dateti
           'serialisation of the ping and pong segments at the rate (about 2 × 120 bytes, 1.9 ms at 1 Mbit/s), '
           'which is part of the link\'s real RTT but not of the delay set on the emulator.', '']
     return results.write_page(out_dir, 'Network profile accuracy and probe cost', 'thesis §4.2.4, Eq. 4-1',
-                              '\n'.join(md), command, tables={'profile.tsv': (core.Sample.columns(), [vars(s) for s in samples])})
+                              '\n'.join(md), command,
+                              tables={'profile.tsv': (core.Sample.columns(), [vars(s) for s in samples])})
 
 
 def machine_note() -> str:

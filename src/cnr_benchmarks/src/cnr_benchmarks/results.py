@@ -7,7 +7,7 @@ commit, on which machine and by which command it was measured::
 
     | measured | commit | machine | command |
     |---|---|---|---|
-    | 2026-11-28 | 209b53a+dirty | Intel(R) Xeon(R) CPU, 2 cores, Debian GNU/Linux 12 (bookworm) | `bench_rtt.sh --samples 5` |
+    | 2026-11-28 | <short hash>+dirty | AMD EPYC, 2 cores, Debian GNU/Linux 12 (bookworm) | `launch_scripts/bench_rtt.sh` |
 
 TSVs and PNGs stand beside it; a re-run replaces them. Raw logs and per-run scratch go to the git-ignored
 ``bench_results/<experiment>/`` (:func:`scratch_dir`). No ROS imports.

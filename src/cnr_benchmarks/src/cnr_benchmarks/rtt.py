@@ -14,9 +14,9 @@ The client always runs on the robot. Placements (thesis Figure 4-14):
 * ``Multi`` a master on each host joined by multimaster_bridge, monitor on the cloud.
 
 Per placement, link RTT (set on the testbed as two one-way halves) and mode (topic echo, naive service
-client, persistent service client) the client takes ``--samples`` probes. Writes docs/results/rtt/ (or DIR): ``rtt.tsv`` (every sample),
-``README.md`` (mean, std.dev, std.err, median as the thesis gives them, thesis figures beside ours) and ``rtt.png``;
-the rows as measured go to bench_results/rtt/rtt.tsv.
+client, persistent service client) the client takes ``--samples`` probes. Writes docs/results/rtt/ (or DIR):
+``rtt.tsv`` (every sample), ``README.md`` (mean, std.dev, std.err, median as the thesis gives them, thesis figures
+beside ours) and ``rtt.png``; the rows as measured go to bench_results/rtt/rtt.tsv.
 """
 from __future__ import annotations
 
