@@ -149,7 +149,7 @@ def control_from_rows(args: argparse.Namespace) -> int:
 
 
 def write_control(args: argparse.Namespace, rows: List[Dict]) -> int:
-    """CT/CB of the completed rows (mission_status, t_task, b_task) into the control values and control.md."""
+    """CT/CB of the completed rows (mission_status, t_task, b_task) into the control values and the page."""
     from cnr_mission.core.task import COMPLETED
     from network_monitor.core.evaluation import ControlValues, write_control_values
     done = [r for r in rows if r['mission_status'] == COMPLETED]
@@ -303,7 +303,7 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
             p.add_argument('--seed', type=int, default=1)
             p.add_argument('--test-fraction', type=float, default=0.3, help='conditions held out (the last ones)')
             p.add_argument('--exclude', default='', help='conditions left out of the analysis (comma-separated '
-                                                         'ids, e.g. runs known to be corrupted; campaign.md says so)')
+                                                         'ids, e.g. runs known to be corrupted; the page says so)')
             for k, v in (('rtt-min', 0.0), ('rtt-max', 200.0), ('rate-min', 0.5), ('rate-max', 50.0),
                          ('loss-min', 0.0), ('loss-max', 0.05)):
                 p.add_argument(f'--{k}', type=float, default=v)

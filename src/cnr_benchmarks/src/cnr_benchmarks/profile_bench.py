@@ -138,7 +138,7 @@ def write_outputs(tsv: str, out_dir: str, command: str, started: datetime.dateti
           'Values: mean [min, max] over the repetitions. RTT: the profile\'s median over its '
           f"{monitor['window']:g} s echo window on an idle link. A_bw: `~profile_now` with a probe ({probe}, "
           'config/network_monitor.yaml); error against the set rate (the emulator itself delivers about 3.5 % '
-          'less, bench_results/testbed.md). Passive: the profile\'s A_bw '
+          'less, docs/results/testbed). Passive: the profile\'s A_bw '
           f'{PASSIVE_AGE:g} s after the probe with {LOAD_FRACTION:g} × rate of background load (a ROS topic of '
           f'{LOAD_HZ:g} messages/s across the bridge). Probe cost: bytes the emulator delivered in both '
           'directions during the call (data and ACKs) and the caller\'s wall time.', '',

@@ -10,7 +10,7 @@ import sys
 import tempfile
 from typing import IO, Dict, Iterable, List, Optional, Sequence
 
-from cnr_benchmarks.results import WS, results_dir, scratch_dir
+from cnr_benchmarks.results import WS, results_dir, scratch_dir, tsv_cell
 
 
 class TsvLog:
@@ -30,16 +30,12 @@ class TsvLog:
         self._f.flush()
 
     def row(self, **values) -> None:
-        self._f.write('\t'.join(_fmt(values[c]) for c in self.columns) + '\n')
+        self._f.write('\t'.join(tsv_cell(values[c]) for c in self.columns) + '\n')
         self._f.flush()
         os.fsync(self._f.fileno())
 
     def close(self) -> None:
         self._f.close()
-
-
-def _fmt(v) -> str:
-    return f'{v:.3f}' if isinstance(v, float) else str(v)
 
 
 def markdown_table(header: Sequence[str], rows: Iterable[Sequence]) -> str:

@@ -122,11 +122,15 @@ def write_figure(fig: Any, path: str, dpi: int = 110) -> str:
     return path
 
 
+def tsv_cell(v: Any) -> str:
+    """A value as a TSV cell: floats with 3 decimals, None empty."""
+    return '' if v is None else (f'{v:.3f}' if isinstance(v, float) else str(v))
+
+
 def write_tsv(path: str, columns: Sequence[str], rows: Sequence[Sequence[Any]]) -> str:
-    """A whole TSV (a header line, then one line per row; None as an empty cell) at ``path``; returns ``path``."""
-    def cell(v: Any) -> str:
-        return '' if v is None else (f'{v:.3f}' if isinstance(v, float) else str(v))
-    write_atomic(path, ''.join('\t'.join(cell(v) for v in r) + '\n' for r in [list(columns)] + [list(r) for r in rows]))
+    """A whole TSV (a header line, then one line per row, :func:`tsv_cell`) at ``path``; returns ``path``."""
+    write_atomic(path, ''.join('\t'.join(tsv_cell(v) for v in r) + '\n'
+                               for r in [list(columns)] + [list(r) for r in rows]))
     return path
 
 
