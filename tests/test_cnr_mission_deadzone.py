@@ -1,9 +1,9 @@
-"""The dead-zone experiment's analysis (cnr_mission.core.deadzone): runs read from report folders, table, plot."""
+"""The dead-zone experiment's analysis (cnr_benchmarks.core.deadzone): runs read from report folders, table, plot."""
 import json
 import os
 
 from cnr_maps.measurements import Measurement, write_tsv
-from cnr_mission.core.deadzone import load_run, run_folder, write_outputs
+from cnr_benchmarks.core.deadzone import load_run, run_folder, write_outputs
 
 
 def fake_run(out, mode, i, found, t, n, idle, temps):

@@ -26,7 +26,7 @@ import time
 from typing import List, Optional
 
 from cnr_benchmarks import cli, report, results
-from cnr_mission.core import deadzone
+from cnr_benchmarks.core import deadzone
 
 EXPERIMENT = 'deadzone'
 RUN_MISSION = os.path.join(results.WS, 'launch_scripts', 'run_mission.sh')
@@ -89,14 +89,7 @@ def main(argv: Optional[List[str]] = None) -> int:
                 report.progress(f'[{ap.prog}] {mode} run {i} failed (status {status}; see {folder}.log)')
     runs = [r for m in args.modes for i in range(1, args.runs + 1)
             for r in [deadzone.load_run(deadzone.run_folder(scratch, m, i), m, i)] if r is not None]
-    os.makedirs(args.out, exist_ok=True)
-    rows = [r.row() for r in runs]
-    if rows:
-        deadzone.plot(runs, os.path.join(args.out, 'deadzone.png'))
-    page = results.write_page(args.out, "The paper's dead-zone experiment", 'thesis Appendix VI, Fig. 11',
-                              deadzone.page_body(runs), cli.command(ap, argv),
-                              tables={'runs.tsv': (list(rows[0]) if rows else [], rows)})
-    print(page)
+    print(deadzone.write_outputs(args.out, runs, cli.command(ap, argv)))
     report.progress(f'[{ap.prog}] done in {time.monotonic() - t0:.0f} s: {args.out}/README.md, deadzone.png, runs.tsv')
     return 0
 

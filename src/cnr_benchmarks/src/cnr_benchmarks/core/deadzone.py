@@ -13,8 +13,8 @@ from typing import Dict, List, Optional, Sequence
 
 import numpy as np
 
+from cnr_benchmarks import results
 from cnr_maps.measurements import read_tsv
-from cnr_params.files import write_atomic
 
 # mode: (placement, link map): the two modes of the paper, with the dead zone cutting both directions (the
 # Wi-Fi-only-at-the-ends corridor), and the paper's "normal" run as it describes it (sensor data does
@@ -151,16 +151,13 @@ def plot(runs: Sequence[Run], path: str) -> None:
 
 
 def write_outputs(out: str, runs: Sequence[Run], command: str) -> str:
-    """runs.tsv, deadzone.md and deadzone.png in ``out``; returns the markdown."""
+    """runs.tsv, deadzone.png and the page README.md in ``out``; returns the page."""
     rows = [r.row() for r in runs]
+    os.makedirs(out, exist_ok=True)
     if rows:
-        write_atomic(os.path.join(out, 'runs.tsv'), '\t'.join(rows[0]) + '\n' + ''.join(
-            '\t'.join('' if v is None else str(v) for v in r.values()) + '\n' for r in rows))
         plot(runs, os.path.join(out, 'deadzone.png'))
-    md = '\n'.join(['# Dead-zone experiment (thesis Appendix VI, Fig. 11)', '', f'Command: `{command}`', '',
-                    page_body(runs)])
-    write_atomic(os.path.join(out, 'deadzone.md'), md)
-    return md
+    return results.write_page(out, "The paper's dead-zone experiment", 'thesis Appendix VI, Fig. 11',
+                              page_body(runs), command, tables={'runs.tsv': (list(rows[0]), rows)} if rows else None)
 
 
 def page_body(runs: Sequence[Run]) -> str:
@@ -173,18 +170,3 @@ def page_body(runs: Sequence[Run]) -> str:
                       '(mfg/activity), or its reports no longer reached the robot at the end (cut off). '
                       'Median (IQR, range, n).', '', table(runs), '',
                       '![temperature vs measurement number](deadzone.png)', ''])
-
-
-def main(argv: Optional[List[str]] = None) -> int:
-    """``rosrun cnr_mission deadzone_report --out DIR --runs N``: table and plot of the runs finished so far."""
-    import argparse
-    ap = argparse.ArgumentParser(prog='deadzone_report', description=main.__doc__)
-    ap.add_argument('--out', required=True)
-    ap.add_argument('--runs', type=int, required=True, help='runs per mode')
-    ap.add_argument('--modes', default=','.join(MODES), help='comma-separated modes')
-    ap.add_argument('--command', default='launch_scripts/exp_deadzone.sh')
-    args = ap.parse_args(argv)
-    runs = [r for m in args.modes.split(',') for i in range(1, args.runs + 1)
-            for r in [load_run(run_folder(args.out, m, i), m, i)] if r is not None]
-    print(write_outputs(args.out, runs, args.command))
-    return 0
