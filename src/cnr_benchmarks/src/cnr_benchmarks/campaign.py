@@ -365,9 +365,4 @@ def main(argv: Optional[List[str]] = None) -> int:
 
 
 if __name__ == '__main__':
-    report.stop_on_signals()
-    try:
-        sys.exit(main())
-    except KeyboardInterrupt:
-        print('interrupted: the rows measured so far are kept; run the same command again to resume', file=sys.stderr)
-        sys.exit(130)
+    report.run_main(main, 'the rows measured so far are kept; run the same command again to resume')

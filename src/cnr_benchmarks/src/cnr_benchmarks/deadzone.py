@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import sys
 import time
 from typing import List, Optional
 
@@ -30,7 +29,6 @@ from cnr_benchmarks.core import deadzone
 
 EXPERIMENT = 'deadzone'
 RUN_MISSION = os.path.join(results.WS, 'launch_scripts', 'run_mission.sh')
-EXIT_INTERRUPTED = 130
 MISSION_ENDED = (0, 3)          # run_mission's statuses of a mission that ended with its report (3: timed out)
 
 
@@ -44,7 +42,7 @@ def run_one(mode: str, folder: str) -> int:
         status = report.call([RUN_MISSION, '--two-host', '--scenario', 'deadzone', '--placement',
                               placement, '--link-map', os.path.join(results.WS, 'config', link_map),
                               '--report-dir', folder], log)
-    if status == EXIT_INTERRUPTED:
+    if status == report.EXIT_INTERRUPTED:
         raise KeyboardInterrupt
     if status not in MISSION_ENDED:
         summary = os.path.join(folder, 'summary.json')
@@ -95,9 +93,4 @@ def main(argv: Optional[List[str]] = None) -> int:
 
 
 if __name__ == '__main__':
-    report.stop_on_signals()
-    try:
-        sys.exit(main())
-    except KeyboardInterrupt:
-        print('interrupted: the finished runs are kept; run the same command again to resume', file=sys.stderr)
-        sys.exit(EXIT_INTERRUPTED)
+    report.run_main(main, 'the finished runs are kept; run the same command again to resume')

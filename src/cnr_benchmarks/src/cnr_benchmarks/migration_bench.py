@@ -370,5 +370,4 @@ def main(argv: Optional[List[str]] = None) -> int:
 
 
 if __name__ == '__main__':
-    report.stop_on_signals()
-    sys.exit(main())
+    report.run_main(main)

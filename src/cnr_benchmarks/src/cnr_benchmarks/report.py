@@ -8,9 +8,10 @@ import signal
 import subprocess
 import sys
 import tempfile
-from typing import IO, Dict, Iterable, List, Optional, Sequence
+from typing import IO, Callable, Dict, Iterable, List, NoReturn, Optional, Sequence
 
 from cnr_benchmarks.results import WS, results_dir, scratch_dir, tsv_cell
+from cnr_harness.script import EXIT_INTERRUPTED
 
 
 class TsvLog:
@@ -58,6 +59,18 @@ def stop_on_signals() -> None:
         raise KeyboardInterrupt
     signal.signal(signal.SIGTERM, _interrupt)
     signal.signal(signal.SIGINT, _interrupt)
+
+
+def run_main(main: Callable[[], int], on_interrupt: str = '') -> NoReturn:
+    """A long run's ``__main__``: :func:`stop_on_signals`, then exit with ``main()``'s status; an interrupt says
+    ``on_interrupt`` (what was kept) and exits with status 130."""
+    stop_on_signals()
+    try:
+        sys.exit(main())
+    except KeyboardInterrupt:
+        if on_interrupt:
+            print(f'interrupted: {on_interrupt}', file=sys.stderr)
+        sys.exit(EXIT_INTERRUPTED)
 
 
 def call(argv: Sequence[str], output: Optional[IO] = None) -> int:

@@ -73,8 +73,4 @@ def _load(path: str):
 
 
 if __name__ == '__main__':
-    report.stop_on_signals()
-    try:
-        sys.exit(main())
-    except KeyboardInterrupt:
-        sys.exit(130)
+    report.run_main(main)
