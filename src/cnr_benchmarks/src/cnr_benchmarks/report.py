@@ -138,6 +138,11 @@ class BenchRun:
         with open(self.secret, 'w') as f:
             f.write(os.urandom(16).hex())
 
+    def say_written(self, out: str) -> None:
+        """Where the page, the rows as measured and the node logs are."""
+        print(f'wrote {os.path.join(out, "README.md")} and its tables and figures (rows as measured in {self.log.path}, '
+              f'node logs in {self.work})', flush=True)
+
     def __enter__(self) -> 'BenchRun':
         try:
             self.testbed.up()

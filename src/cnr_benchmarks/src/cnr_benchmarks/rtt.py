@@ -187,8 +187,7 @@ def main(argv=None) -> int:
             rows += run_placement(run.testbed, p, run.rtts, args.samples, args.interval, run.log, run.work,
                                   run.secret)
     print(write_outputs(rows, run.rtts, args.out, cli.command(ap, argv)))
-    print(f'wrote {args.out}/README.md, rtt.tsv, rtt.png (rows as measured in {run.log.path}, node logs in '
-          f'{run.work})')
+    run.say_written(args.out)
     return 0
 
 

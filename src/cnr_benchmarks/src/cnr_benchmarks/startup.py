@@ -250,8 +250,7 @@ def main(argv=None) -> int:
             finally:
                 setup.stop()
     print(write_outputs(rows, bench.rtts, args.out, cli.command(ap, argv)))
-    print(f'wrote {args.out}/README.md, startup.tsv, startup.png (rows as measured in {bench.log.path}, node logs '
-          f'in {bench.work})')
+    bench.say_written(args.out)
     return 0
 
 
