@@ -194,8 +194,7 @@ def control_missions(args: argparse.Namespace, scenario: str) -> int:
         run = os.path.join(runs_dir, f'{i:02d}')
         summary = os.path.join(run, 'summary.json')
         if not os.path.exists(summary):
-            if os.path.exists(run):             # an interrupted run: kept aside, never reloaded
-                os.replace(run, f'{run}.prev{int(time.time())}')
+            report.move_aside(run)              # an interrupted run: kept aside, never reloaded
             report.progress(f'[control] run {i}/{args.runs}: {args.task}@{args.location} mission, every module on '
                             f'the robot' + (f', link map {os.path.relpath(link_map, report.WS)}' if link_map else ''))
             argv = two_host_argv(args.location, run, args.port, getattr(args, 'cfg_dir', None))

@@ -116,8 +116,7 @@ class Bench:
         _name, map_file, x, y, a = line
         from cnr_harness import Proc
         report_dir = os.path.join(self.out, 'mission')
-        if os.path.exists(report_dir):
-            os.replace(report_dir, f'{report_dir}.prev{int(time.time())}')
+        report.move_aside(report_dir)
         self.mission = Proc(['rosrun', 'cnr_mission', 'two_host_mission', '--config-dir', self.cfg_dir,
                              '--scenario', path, '--map', map_file, '--start', x, y, a, '--placement', 'all_robot',
                              '--report-dir', report_dir, '--port', str(self.args.port), '--migration'],

@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+import time
 from typing import IO, Callable, Dict, Iterable, List, NoReturn, Optional, Sequence
 
 from cnr_benchmarks.results import WS, results_dir, scratch_dir, tsv_cell
@@ -37,6 +38,13 @@ class TsvLog:
 
     def close(self) -> None:
         self._f.close()
+
+
+def move_aside(path: str) -> None:
+    """Keep an earlier run's folder (or file) as ``<path>.prev<unix time>`` so a new one starts empty; nothing
+    when there is none."""
+    if os.path.exists(path):
+        os.replace(path, f'{path}.prev{int(time.time())}')
 
 
 def markdown_table(header: Sequence[str], rows: Iterable[Sequence]) -> str:

@@ -6,7 +6,6 @@ import argparse
 import os
 import subprocess
 import sys
-import time
 from typing import Dict, List, Optional
 
 import yaml
@@ -41,8 +40,7 @@ def run_session(args: argparse.Namespace, plan: Dict, results: str, training_dir
     plan_path = os.path.join(scratch, 'plan.yaml')
     write_atomic(plan_path, yaml.safe_dump(plan, sort_keys=False))
     session = os.path.join(scratch, 'session')
-    if os.path.exists(session):
-        os.replace(session, f'{session}.prev{int(time.time())}')
+    report.move_aside(session)
     argv = two_host_argv(plan['location'], session, args.port, cfg_dir)
     if argv is None:
         return 2
