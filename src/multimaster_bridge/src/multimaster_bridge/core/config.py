@@ -25,6 +25,7 @@ class BridgeConfig:
     secret: bytes
     topics: Filter
     services: Filter
+    in_order: Filter          # topics whose publishers are never reconnected by a new URI spelling
     heartbeat_rate: float
     loss_timeout: float
     poll_rate: float
@@ -93,6 +94,7 @@ def parse(section: Section) -> BridgeConfig:
         name=name, listen=listen, peers=peers, secret=secret.encode(),
         topics=Filter(_globs(section, 'allow_topics'), _globs(section, 'deny_topics')),
         services=Filter(_globs(section, 'allow_services'), _globs(section, 'deny_services')),
+        in_order=Filter(_globs(section, 'in_order_topics')),
         heartbeat_rate=section.number('heartbeat_rate', minimum=1.0, maximum=50.0),
         loss_timeout=section.number('loss_timeout', positive=True),
         poll_rate=section.number('poll_rate', minimum=0.05, maximum=100.0),

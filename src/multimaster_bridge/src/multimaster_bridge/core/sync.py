@@ -24,6 +24,16 @@ Rules (see the package README):
   stays listed for ever (its unregistration no longer matches). Registering the other spelling then makes
   rosmaster shut down "the old node" — the old spelling is the remote node's own URI, so the real node on the
   other host would be told to exit. Such a node keeps the master's spelling.
+* **An outage in one direction** stalls the connections both ways, but only one bridge loses its peer: the
+  other reconnects the peer's nodes when the peer's heartbeats say it heard us again
+  (:func:`rejoined_without_our_loss`).
+* **In-order topics keep their connection**: a forced reconnect gives a subscriber a second connection to the
+  same publisher while the first still holds what the publisher sent during the outage; TCP delivers that
+  backlog when it next retransmits, seconds after the new connection brought fresh messages, so the subscriber
+  gets old messages after new ones. On ``/clock`` that is time going backwards (rospy raises
+  ROSTimeMovedBackwardsException in every sleeping thread of a sim-time node). A remote node that publishes a
+  topic of the ``in_order`` filter therefore keeps its URI spelling (:func:`in_order_publishers`): its
+  subscribers resume on the old connection, backlog first, in order.
 """
 from __future__ import annotations
 
@@ -110,6 +120,22 @@ def uri_spelling(uri: str, generation: int) -> str:
     return base + '/' if with_slash else base
 
 
+def rejoined_without_our_loss(view_before: Optional[bool], view_now: bool, since_our_return: float,
+                              loss_timeout: float) -> bool:
+    """Whether a peer's heartbeat says it lost us and hears us again while we did not lose it: an outage in one
+    direction. Our subscribers' connections to its publishers stalled as well (their data or their ACKs were
+    lost), so its nodes are reconnected here too (a new generation). ``view_before``/``view_now``: whether the
+    peer considered us alive in its previous and in this heartbeat; ``since_our_return``: seconds since we heard
+    the peer again after losing it ourselves. Within ``loss_timeout`` of that the peer's return belongs to the
+    same outage, which our own loss already reconnected (a second generation would restore the old spelling)."""
+    return view_before is False and view_now and since_our_return > loss_timeout
+
+
+def in_order_publishers(state: dict, in_order: Filter) -> Set[str]:
+    """The nodes of a peer's ``state`` that publish a topic whose subscribers must get its messages in order."""
+    return {n for topic, nodes in state.get('pubs', {}).items() if in_order.passes(topic) for n in nodes}
+
+
 def export_state(snap: Snapshot, owned: Set[str], topics: Filter, services: Filter,
                  ages: Dict[str, float], md5s: Dict[str, str]) -> dict:
     """The part of ``snap`` a peer may import: filtered, without the bridge's own proxies.
@@ -151,7 +177,8 @@ class Plan:
 
 
 def plan(peer: str, state: dict, local: Snapshot, owned: Set[str], topics: Filter, services: Filter,
-         local_ages: Dict[str, float], md5s: Dict[str, str], generation: int = 0) -> Plan:
+         local_ages: Dict[str, float], md5s: Dict[str, str], generation: int = 0,
+         in_order: Optional[Filter] = None) -> Plan:
     """The registrations of ``peer``'s ``state`` this bridge wants in its master.
 
     Args:
@@ -160,12 +187,14 @@ def plan(peer: str, state: dict, local: Snapshot, owned: Set[str], topics: Filte
         local_ages: service -> age of its local provider [s], for newest-provider-wins.
         md5s: type -> local md5sum.
         generation: reconnect generation of this peer (selects the URI spelling).
+        in_order: topics whose publishers keep their URI spelling in every generation (no forced reconnect).
     """
     out: Set[Registration] = set()
     problems: List[str] = []
     nodes: Dict[str, str] = state.get('nodes', {})
     types: Dict[str, str] = state.get('types', {})
     remote_md5: Dict[str, str] = state.get('md5', {})
+    steady = in_order_publishers(state, in_order) if in_order is not None else set()
 
     def identity(node: str) -> Optional[Tuple[str, str]]:
         uri = nodes.get(node)
@@ -175,7 +204,7 @@ def plan(peer: str, state: dict, local: Snapshot, owned: Set[str], topics: Filte
         if cid in local.nodes and cid not in owned:
             problems.append(f'{peer}: node {node} not imported: local node {cid} has that name')
             return None
-        return cid, uri_spelling(uri, generation)
+        return cid, uri_spelling(uri, 0 if node in steady else generation)
 
     def topic_ok(topic: str) -> bool:
         if not topics.passes(topic):
