@@ -43,6 +43,7 @@ class PeerState:
         self.kept_spelling: Dict[str, str] = {}    # caller_id -> URI spelling the master still holds (this generation)
         self.lost_at = -math.inf
         self.returned_at = -math.inf
+        self.their_view: Optional[bool] = None   # whether the peer's last heartbeat said it hears us
 
 
 class _RememberingTransport(xmlrpc.client.Transport):
@@ -257,7 +258,7 @@ class Bridge:
             t1, t2 = peer.last_hb
             echo = [t1, t2, time.time()]
         peer.estimator.on_sent()
-        self._send(peer, 'hb', t1=time.time(), echo=echo, digest=self.export_digest)
+        self._send(peer, 'hb', t1=time.time(), echo=echo, digest=self.export_digest, up=peer.alive)
 
     def receive_loop(self) -> None:
         while not self.stopped:
@@ -301,6 +302,16 @@ class Bridge:
             elif msg.get('digest') != peer.state_digest and now - peer.last_req > 0.3:
                 self._send(peer, 'req')
                 peer.last_req = now
+            view = msg.get('up')
+            if view is not None:
+                if sync.rejoined_without_our_loss(peer.their_view, bool(view), now - peer.returned_at,
+                                                  self.cfg.loss_timeout):
+                    peer.generation += 1
+                    peer.kept_spelling = {}
+                    rospy.loginfo(f'bridge: peer {peer.peer.name} lost us and hears us again: reconnecting to its '
+                                  f'nodes here too')
+                    self.wake.set()
+                peer.their_view = bool(view)
         elif kind == 'state':
             if peer.alive:
                 peer.state = msg['state']
@@ -399,7 +410,7 @@ class Bridge:
                 desired: Set[sync.Registration] = set()
             else:
                 result = sync.plan(peer.peer.name, state, snap, owned, self.cfg.topics, self.cfg.services,
-                                   self.local_ages, self.local_md5s, generation)
+                                   self.local_ages, self.local_md5s, generation, self.cfg.in_order)
                 for problem in result.problems:
                     self._report(problem)
                 desired = sync.respell(result.registrations, peer.kept_spelling)
