@@ -43,7 +43,7 @@ PKGS=(
   ros-rosgraph-msgs python3-rosgraph-msgs python3-map-msgs
   # Python libraries (Debian's, built for /usr/bin/python3)
   python3-numpy python3-numba python3-scipy python3-skimage python3-sklearn python3-yaml python3-psutil
-  python3-pil python3-matplotlib python3-serial python3-pyroute2 python3-pytest python3-pytest-timeout
+  python3-pil python3-matplotlib python3-serial python3-pyroute2 python3-pytest python3-pytest-timeout python3-pytest-xdist
   python3-netifaces
   # the testbed: network namespaces, ping, iperf3; pgrep
   iproute2 iputils-ping iperf3 procps

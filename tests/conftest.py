@@ -92,3 +92,6 @@ def pytest_collection_modifyitems(config, items) -> None:
         if item.get_closest_marker('integration') is None and any(
                 _STARTS_SOMETHING.search(text) for text in _sources(item)):
             item.add_marker(pytest.mark.integration)
+    # the longest group first: with run_tests.sh's workers, the real-time missions on the default testbed (one
+    # after the other, xdist group "default_testbed") start at once while the other worker takes everything else
+    items.sort(key=lambda item: item.get_closest_marker('xdist_group') is None)

@@ -18,7 +18,8 @@ from network_monitor.core.training import Row, TrainingSet
 
 WS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 LOGS = os.path.join(WS, 'build', 'test_logs')
-pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason='needs root (network namespaces, TUN devices, cgroups)')
+pytestmark = [pytest.mark.skipif(os.geteuid() != 0, reason='needs root (network namespaces, TUN devices, cgroups)'),
+              pytest.mark.xdist_group('default_testbed')]     # the default testbed and port: one at a time
 TASK, LOCATION = 'corridor_round_trip', 'corridor'
 
 

@@ -16,7 +16,8 @@ from cnr_harness import Proc, wait_until
 
 WS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 LOGS = os.path.join(WS, 'build', 'test_logs')
-pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason='needs root (network namespaces, TUN devices, cgroups)')
+pytestmark = [pytest.mark.skipif(os.geteuid() != 0, reason='needs root (network namespaces, TUN devices, cgroups)'),
+              pytest.mark.xdist_group('default_testbed')]     # the default testbed and port: one at a time
 
 
 def scenario_line(path):
