@@ -9,8 +9,7 @@ import os
 import sys
 from typing import List, Optional, Sequence
 
-from cnr_harness.script import Parser
-from cnr_params.config import EXIT_CONFIG
+from cnr_harness.script import Parser, require_root  # noqa: F401  (the entry points import it from here)
 
 __all__ = ['Parser', 'command', 'comma_list', 'positive_int', 'require_root', 'sim_part_parser']
 
@@ -28,13 +27,6 @@ def sim_part_parser(doc: str, json_name: str) -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=doc.split('\n')[0])
     ap.add_argument('--out', default=os.path.join(scratch_dir('sim'), json_name), help='default %(default)s')
     return ap
-
-
-def require_root(prog: str, why: str) -> None:
-    """Exit with status 2 and one line naming ``why`` unless running as root."""
-    if os.geteuid() != 0:
-        print(f'{prog}: needs root ({why})', file=sys.stderr)
-        raise SystemExit(EXIT_CONFIG)
 
 
 def positive_int(text: str) -> int:

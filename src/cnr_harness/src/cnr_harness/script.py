@@ -55,6 +55,13 @@ class Parser(argparse.ArgumentParser):
         self.exit(EXIT_CONFIG, f'{self.prog}: {message} (see --help)\n')
 
 
+def require_root(prog: str, why: str) -> None:
+    """Exit with status 2 and one line naming ``why`` unless running as root."""
+    if os.geteuid() != 0:
+        print(f'{prog}: needs root ({why})', file=sys.stderr)
+        raise SystemExit(EXIT_CONFIG)
+
+
 def log(prog: str, text: str) -> None:
     """A progress line ``[<script>] text``."""
     print(f'[{prog}] {text}', flush=True)

@@ -53,6 +53,7 @@ import yaml
 from cnr_bringup.launcher import EXIT_INTERRUPTED, NOISE
 from cnr_bringup.placement import Placement, launch_args, load_catalog, describe
 from cnr_harness import Proc, WaitTimeout, wait_until
+from cnr_harness.script import require_root
 from cnr_mission.core.report import write_summary
 from cnr_mission.options import EXIT_NOT_FOUND, add_link_arguments, add_migration_arguments
 from cnr_params.config import EXIT_CONFIG, ConfigError, Section, load_yaml
@@ -502,10 +503,7 @@ def run(args: TwoHostOptions) -> int:
             print(f'two_host_mission: --loss must be 0..100 %, got {args.loss}', file=sys.stderr)
             return EXIT_CONFIG
         link['loss'] = args.loss / 100.0
-    if os.geteuid() != 0:
-        print('two_host_mission: the two-host mission needs root (network namespaces, TUN devices, cgroups)',
-              file=sys.stderr)
-        return EXIT_CONFIG
+    require_root('two_host_mission', 'network namespaces, TUN devices, cgroups')
     try:
         mission = TwoHostMission(args.config_dir, args.scenario, args.map, args.start, placement, args.report_dir,
                                  args.port, link, args.trace, args.link_map, args.migration, args.rule,
