@@ -1,0 +1,98 @@
+"""bench_flap's ROS-free part: instance intervals from logs, failovers, standstill against outages, the goal line."""
+import json
+import os
+
+from cnr_benchmarks import results
+from cnr_benchmarks.core import flap
+
+
+def line(t, inst, what, level='INFO'):
+    return f'[{level}] [{t:.6f}]: {inst}: {what}\n'
+
+
+def test_active_intervals_end_at_a_lapse_a_freeze_or_the_end_of_the_log():
+    log = [line(10.0, 'mfg@cloud', 'standby'), line(12.0, 'mfg@cloud', 'active (term 1)'),
+           line(20.0, 'mfg@cloud', 'lease lapsed (term 1): outputs closed until a renewal is granted', 'WARN'),
+           line(21.0, 'mfg@cloud', 'active (term 1)'), line(30.0, 'mfg@cloud', 'frozen (term 2); state 10 bytes'),
+           line(31.0, 'mfg@robot', 'active (term 2)'), line(40.0, 'mfg@robot', 'still here')]
+    iv = flap.active_intervals(log)
+    assert iv['mfg@cloud'] == [flap.Interval(12.0, 20.0), flap.Interval(21.0, 30.0)]
+    assert iv['mfg@robot'] == [flap.Interval(31.0, 40.0)]
+
+
+def test_most_active_at_once_counts_overlaps_per_module_only():
+    iv = {'mfg@cloud': [flap.Interval(0, 10)], 'mfg@robot': [flap.Interval(10, 20)],
+          'move_base@cloud': [flap.Interval(0, 20)]}
+    assert flap.most_active_at_once(iv) == {'mfg': 1, 'move_base': 1}
+    iv['mfg@robot'] = [flap.Interval(9.5, 20)]
+    assert flap.most_active_at_once(iv)['mfg'] == 2
+
+
+def event(i, wall_start, wall_end):
+    return flap.Event(i, wall_start - 1000, wall_end - wall_start, 'both', 'outage', 1.0, wall_start, wall_end)
+
+
+def test_a_failover_is_timed_from_the_cut_it_followed_to_the_target_instance_active():
+    log = ['[WARN] [105.500000]: mfg: the active instance on cloud lost its lease (cut off?): failing over to robot\n']
+    found = flap.failovers(log)
+    assert found == [(105.5, 'mfg', 'robot')]
+    intervals = {'mfg@robot': [flap.Interval(50.0, 60.0), flap.Interval(105.8, 200.0)]}
+    events = [event(0, 90.0, 95.0), event(1, 104.0, 110.0)]
+    assert flap.failover_downtimes(found, intervals, events) == [105.8 - 104.0]
+    assert flap.failover_downtimes(found, {}, events) == [None]
+
+
+def test_outage_overlap_counts_only_the_part_inside_the_interval():
+    events = [event(0, 10.0, 20.0), event(1, 30.0, 32.0)]
+    assert flap.outage_overlap(events, 15.0, 31.0) == 5.0 + 1.0
+
+
+def write_run(folder, summary, played, restores, logs=()):
+    os.makedirs(os.path.join(folder, 'logs', 'instances'), exist_ok=True)
+    with open(os.path.join(folder, 'summary.json'), 'w') as f:
+        json.dump(summary, f)
+    results.write_tsv(os.path.join(folder, 'schedule.tsv'), flap.SCHEDULE_COLUMNS,
+                      [[getattr(e, c) for c in flap.SCHEDULE_COLUMNS] for e in played])
+    results.write_tsv(os.path.join(folder, 'restore.tsv'), flap.RESTORE_COLUMNS,
+                      [[e.index, e.wall_end, r] for e, r in zip(played, restores)])
+    for name, text in logs:
+        with open(os.path.join(folder, 'logs', name), 'w') as f:
+            f.write(text)
+    with open(os.path.join(folder, 'status'), 'w') as f:
+        f.write('0\n')
+
+
+def good_summary(**over):
+    s = dict(found=True, measurements_published_on_robot=300,
+             store_check=dict(stored=300, missing_count=0, duplicates=0),
+             standstill=dict(longest=7.0, longest_start=100.0))
+    s.update(over)
+    return s
+
+
+def test_a_run_on_the_goal_line_and_runs_off_it(tmp_path):
+    played = [event(0, 99.0, 105.0), event(1, 120.0, 121.0)]
+    ok = flap.run_folder(str(tmp_path), 'paper_normal', 1)
+    write_run(ok, good_summary(), played, [0.3, 0.6],
+              [('instances/mfg-1.log', line(50.0, 'mfg@cloud', 'active (term 1)') + line(99.5, 'mfg@cloud',
+                                                                                        'lease lapsed (term 1)'))])
+    run = flap.load_run(ok, 'paper_normal', 1)
+    assert run.goal_failures() == []
+    assert run.standstill_outage == 5.0 and run.restore_max == 0.6 and run.most_active == 1
+    bad = flap.run_folder(str(tmp_path), 'paper_normal', 2)
+    write_run(bad, good_summary(found=False, store_check=dict(stored=299, missing_count=1, duplicates=0),
+                                standstill=dict(longest=30.0, longest_start=100.0)), played, [0.3, ''])
+    run2 = flap.load_run(bad, 'paper_normal', 2)
+    failures = ' '.join(run2.goal_failures())
+    for word in ('not completed', 'missing 1', 'standstill 30.0 s', '1 not restored'):
+        assert word in failures
+    md = flap.page_body([run, run2], 2, 1)
+    assert '| paper_normal | 2 (1) | 4 |' in md and '1 of 2' in md and 'paper_normal run 2' in md
+
+
+def test_an_unfinished_run_is_none_and_every_config_has_mission_arguments(tmp_path):
+    assert flap.load_run(str(tmp_path / 'nothing'), 'paper_normal', 1) is None
+    for config in flap.CONFIGS:
+        args = flap.mission_args(config)
+        assert args[:2] == ['--two-host', '--placement']
+    assert '--network-aware' in flap.mission_args('network_aware')
