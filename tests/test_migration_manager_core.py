@@ -99,13 +99,16 @@ def test_a_superseded_holder_is_never_active_again_until_promoted_anew():
     assert not h.superseded
 
 
-def test_never_two_active_under_random_delays_losses_and_failovers():
+@pytest.mark.parametrize('paths, host_durations', [(1, None), (2, {'robot': 2.0})])
+def test_never_two_active_under_random_delays_losses_and_failovers(paths, host_durations):
     """A cloud holder renews over a link with random delays, losses and outages; the grantor fails over to the
     robot whenever the cloud's lease lapses and back when asked, each promotion carrying a pre-grant of the
-    target's newest standby request and reaching it late or never: at no sampled instant are both active."""
+    target's newest standby request and reaching it late or never: at no sampled instant are both active. Also
+    with each cloud request and answer sent over two paths (independent delays and losses; the grantor answers
+    the first copy only) and a longer lease for the robot's instance."""
     import random
     rng = random.Random(7)
-    g = Grantor('mfg', D, MARGIN)
+    g = Grantor('mfg', D, MARGIN, host_durations=host_durations)
     holders = {h: Holder('mfg', instance_id('mfg', h)) for h in ('robot', 'cloud')}
     holders['cloud'].promoted(g.promote('mfg@cloud', 0.0))
     in_flight = []                                  # (deliver_at, kind, payload)
@@ -115,9 +118,10 @@ def test_never_two_active_under_random_delays_losses_and_failovers():
         outage = (int(t) // 10) % 3 == 2            # 10 s out of every 30 s
 
         def send(name: str, kind: str, payload) -> None:
-            delay = 0.0 if name == 'robot' else rng.uniform(0.005, 0.4)
-            if name == 'robot' or (not outage and rng.random() > 0.05):
-                in_flight.append((t + delay, kind, (name, delay) + payload))
+            for _ in range(1 if name == 'robot' or kind in ('standby', 'promote') else paths):
+                delay = 0.0 if name == 'robot' else rng.uniform(0.005, 0.4)
+                if name == 'robot' or (not outage and rng.random() > 0.05):
+                    in_flight.append((t + delay, kind, (name, delay) + payload))
 
         for name, h in holders.items():
             if round(t / 0.1) == t / 0.1 or rng.random() < 0.1:
@@ -131,9 +135,13 @@ def test_never_two_active_under_random_delays_losses_and_failovers():
             name, delay = payload[:2]
             if kind == 'req':
                 term, nonce = payload[2:]
+                if not g.first_receipt(instance_id('mfg', name), nonce):
+                    continue                         # the other path's copy: answered already
                 a = g.request(instance_id('mfg', name), term, nonce, t)
-                if name == 'robot' or not outage:
-                    in_flight.append((t + delay, 'ans', (name, delay, a)))
+                for _ in range(1 if name == 'robot' else paths):
+                    if name == 'robot' or not outage:
+                        late = 0.0 if name == 'robot' else rng.uniform(0.005, 0.4)
+                        in_flight.append((t + late, 'ans', (name, late, a)))
             elif kind == 'standby':
                 g.standby_request(instance_id('mfg', name), payload[2], t)
             elif kind == 'promote':
@@ -190,6 +198,67 @@ def test_no_pregrant_from_a_stale_or_unknown_standby_request():
     assert g2.pregrant('mfg@cloud', 0.5) == (0, D)  # not the holder: nothing granted
     a, b = Holder('mfg', 'mfg@robot'), Holder('mfg', 'mfg@robot')
     assert a.request(0.0) != b.request(0.0)         # nonces of two processes differ
+
+
+def test_a_lease_s_length_follows_the_holder_s_host_and_every_answer_carries_it():
+    g = Grantor('mfg', D, MARGIN, host_durations={'robot': 2.0})
+    robot, cloud = Holder('mfg', 'mfg@robot'), Holder('mfg', 'mfg@cloud')
+    robot.promoted(g.promote('mfg@robot', 0.0))
+    grant(g, robot, 1.0, 1.1, 1.1)
+    assert robot.active(2.99) and not robot.active(3.0)              # its request + 2.0
+    assert g.free_at() == pytest.approx(1.1 + 2.0 + MARGIN)
+    assert g.release('mfg@robot', robot.term)
+    cloud.promoted(g.promote('mfg@cloud', 4.0))
+    grant(g, cloud, 5.0, 5.05, 5.1)
+    assert cloud.active(5.59) and not cloud.active(5.6)               # its request + D
+    assert g.free_at() == pytest.approx(5.05 + D + MARGIN)
+    nonce = robot.request(6.0)                      # the robot's standby request: a pre-grant of its own length
+    g.standby_request('mfg@robot', nonce, 6.0)
+    g.revoke()
+    g.promote('mfg@robot', 6.1)
+    assert g.pregrant('mfg@robot', 6.1) == (nonce, 2.0)
+    assert g.free_at() == pytest.approx(6.1 + 2.0 + MARGIN)
+    with pytest.raises(ValueError):
+        Grantor('mfg', D, MARGIN, host_durations={'robot': 0.0})
+
+
+def test_a_request_s_copy_over_another_path_is_told_from_a_new_request():
+    g, h = Grantor('mfg', D, MARGIN), Holder('mfg', 'mfg@cloud')
+    h.promoted(g.promote('mfg@cloud', 0.0))
+    first, second = h.request(1.0), h.request(1.1)
+    assert g.first_receipt('mfg@cloud', second)     # the paths deliver in any order
+    assert g.first_receipt('mfg@cloud', first)
+    assert not g.first_receipt('mfg@cloud', first) and not g.first_receipt('mfg@cloud', second)
+    assert g.first_receipt('mfg@robot', first)      # another instance's nonce is its own
+    answer = g.request('mfg@cloud', h.term, second, 1.15)
+    h.on_answer(answer)
+    h.on_answer(answer)                             # the answer's copy over the other path changes nothing
+    assert h.active(1.69) and not h.active(1.71)
+    for n in range(Grantor.RECEIPTS + 1):           # only the newest are remembered
+        g.first_receipt('mfg@cloud', 1000 + n)
+    assert len(g.receipts) == Grantor.RECEIPTS and g.first_receipt('mfg@cloud', 1000)
+
+
+def test_failover_after_a_cut_takes_the_lease_plus_the_margin_at_most(workspace):
+    """The configured figures: a cut-off cloud instance is replaced within duration + margin of its last
+    renewal's receipt (<= 1 s after the cut, with time to spare for the promotion), its own lease ends before,
+    and an instance on the robot keeps a longer lease, renewed less often."""
+    cfg = from_section(Section(load_yaml(os.path.join(workspace, 'config', 'migration.yaml')), 'config/migration.yaml'))
+    lease = cfg.lease
+    g = lease.grantor('mfg', cfg.authority)
+    h = Holder('mfg', 'mfg@cloud')
+    h.promoted(g.promote('mfg@cloud', 0.0))
+    t = 0.0
+    while t < 10.0:                                  # renewals every renew_period, 50 ms each way
+        h.on_answer(g.request('mfg@cloud', h.term, h.request(t), t + 0.05))
+        t = round(t + lease.renew_period, 6)
+    cut = t - lease.renew_period + 0.05              # the link goes just after the last request arrived
+    assert g.free_at() - cut <= lease.duration + lease.margin <= 0.8
+    assert not h.active(g.free_at() - lease.margin)
+    assert lease.paths_on('cloud', cfg.authority) >= 2 and lease.paths_on('robot', cfg.authority) == 1
+    assert g.duration_of('mfg@robot') > lease.duration
+    assert lease.renew_period_on('robot', cfg.authority) >= lease.renew_period
+    assert set(cfg.hot_standby) >= {'local_mapcell_manager', 'global_goal_manager', 'mfg'}
 
 
 def test_term_filter_accepts_only_the_current_holder():
@@ -418,12 +487,22 @@ def test_config_from_the_workspace_and_errors_name_the_field(workspace):
     bad = dict(data, lease=dict(data['lease'], renew_period=data['lease']['duration']))
     with pytest.raises(ConfigError, match='lease.renew_period'):
         from_section(Section(bad, 'config/migration.yaml'))
-    bad = dict(data, hot_standby=['kestrel_driver'])
+    bad = dict(data, hot_standby='mfg')
     with pytest.raises(ConfigError, match='hot_standby'):
         from_section(Section(bad, 'config/migration.yaml'))
+    for key in ('authority_renew_period', 'paths'):
+        with pytest.raises(ConfigError, match=f'lease.{key}'):
+            from_section(Section(dict(data, lease={k: v for k, v in data['lease'].items() if k != key}),
+                                 'config/migration.yaml'))
+    bad = dict(data, lease=dict(data['lease'], authority_renew_period=data['lease']['authority_duration']))
+    with pytest.raises(ConfigError, match='lease.authority_renew_period'):
+        from_section(Section(bad, 'config/migration.yaml'))
+    with pytest.raises(ConfigError, match='lease.paths'):
+        from_section(Section(dict(data, lease=dict(data['lease'], paths=0)), 'config/migration.yaml'))
     assert cfg.dormant == {'move_base': ('robot',)}
     fewer = from_section(Section(dict(data, modules=['mfg']), 'config/migration.yaml'))
     assert fewer.dormant == {}                  # a run managing fewer modules ignores the others' entries
+    assert fewer.hot_standby == ('mfg',)
     for dormant, field in (({'mfg': ['moon']}, 'mfg'), ({'mfg': 'robot'}, 'mfg'), (['move_base'], 'must map')):
         with pytest.raises(ConfigError, match=f'dormant.*{field}'):
             from_section(Section(dict(data, dormant=dormant), 'config/migration.yaml'))

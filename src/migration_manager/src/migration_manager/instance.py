@@ -37,7 +37,7 @@ from __future__ import annotations
 import os
 import threading
 import time
-from typing import Any, Dict, Optional, Tuple
+from typing import Any, Dict, List, Optional, Tuple
 
 import rospy
 
@@ -124,6 +124,13 @@ def topic(module: str, leaf: str) -> str:
     return f'/migration/{module}/{leaf}'
 
 
+def lease_topics(module: str, leaf: str, paths: int) -> List[str]:
+    """The topics of ``paths`` connections for one kind of lease traffic (``renew`` or ``lease``): the first is
+    ``/migration/<module>/<leaf>``, the k-th ``.../<leaf><k>``. Each is a TCP connection of its own, so a packet
+    lost on one stalls only that one until its retransmission."""
+    return [topic(module, leaf if k == 1 else f'{leaf}{k}') for k in range(1, paths + 1)]
+
+
 def prepare_process(namespace: str = '~migration') -> bool:
     """For a node that creates subscribers before its :class:`ManagedInstance`: if it runs managed, give its
     subscriptions their per-host caller id now (see :func:`cnr_runtime.distinct_callerid`). Returns whether it
@@ -171,11 +178,16 @@ class ManagedInstance:
         self.replica_lock = threading.Lock()
         self.keyframe_asked = -1e9             # monotonic time of this standby's last keyframe request
         self.keyframe_missing = ('', 0)        # (instance, replica seq) when a patch without its base last made it ask
-        self.renew_pub = rospy.Publisher(topic(module, 'renew'), MigrationRenew, queue_size=10)
+        # across the link: a short lease, renewed often, over several connections (config/migration.yaml lease)
+        self.renew_period = self.cfg.lease.renew_period_on(self.host, self.cfg.authority)
+        paths = self.cfg.lease.paths_on(self.host, self.cfg.authority)
+        self.renew_pubs = [rospy.Publisher(t, MigrationRenew, queue_size=10)
+                           for t in lease_topics(module, 'renew', paths)]
         self.state_pub = rospy.Publisher(topic(module, 'state'), ModuleState, queue_size=2)
         self.status_pub = rospy.Publisher(topic(module, f'{self.host}/status'), InstanceStatus, queue_size=5,
                                           latch=True)
-        rospy.Subscriber(topic(module, 'lease'), MigrationLease, self._on_lease, queue_size=20)
+        for t in lease_topics(module, 'lease', paths):
+            rospy.Subscriber(t, MigrationLease, self._on_lease, queue_size=20)
         self.replica_sub: Optional[rospy.Subscriber] = None
         # the newest replica not given to prepare_state yet: (instance, seq, whole state)
         self.to_prepare: Optional[Tuple[str, int, Dict[str, Any]]] = None
@@ -242,10 +254,13 @@ class ManagedInstance:
         return state_codec.encode(self.module, self.hooks.get_state())
 
     def _renew(self) -> None:
+        """A request: a promoted instance's over every path, a standby's (never answered) over the first."""
         with self.lock:
             nonce = self.holder.request(time.monotonic())
             term = self.holder.term
-        self.renew_pub.publish(MigrationRenew(module=self.module, instance=self.id, term=term, nonce=nonce))
+        msg = MigrationRenew(module=self.module, instance=self.id, term=term, nonce=nonce)
+        for pub in self.renew_pubs[:len(self.renew_pubs) if term else 1]:
+            pub.publish(msg)
 
     @quiet_at_shutdown
     def _on_control(self, req) -> InstanceControlResponse:
@@ -399,7 +414,7 @@ class ManagedInstance:
                 role = self._role()
             try:
                 if (promoted or standby) and now >= next_renew:
-                    next_renew = now + cfg.lease.renew_period
+                    next_renew = now + self.renew_period
                     self._renew()
                 self._transitions()
                 if superseded:
@@ -426,7 +441,7 @@ class ManagedInstance:
                 if rospy.core.is_shutdown_requested():
                     return
                 raise
-            self.wake.wait(min(cfg.lease.renew_period, cfg.replicate_period, cfg.status_period) / 4)
+            self.wake.wait(min(self.renew_period, cfg.replicate_period, cfg.status_period) / 4)
             self.wake.clear()
 
     def _publish_state(self) -> None:

@@ -25,7 +25,7 @@ from migration_manager.core.config import from_section
 from migration_manager.core.priority import Elevator
 from migration_manager.core.lease import Answer, Grantor, host_of, instance_id
 from migration_manager.core.plan import Migration, Step
-from migration_manager.instance import topic
+from migration_manager.instance import lease_topics, topic
 
 
 class ControlLink:
@@ -116,15 +116,19 @@ class Manager:
             self.initial[module] = host
         self.lock = threading.RLock()
         self.ids = itertools.count(1)
-        self.books: Dict[str, ModuleBook] = {m: ModuleBook(m, cfg.lease.grantor(m)) for m in cfg.modules}
-        self.lease_pubs = {m: rospy.Publisher(topic(m, 'lease'), MigrationLease, queue_size=50) for m in cfg.modules}
+        self.books: Dict[str, ModuleBook] = {m: ModuleBook(m, cfg.lease.grantor(m, cfg.authority))
+                                             for m in cfg.modules}
+        # each module's answers over every path (lease_topics): the first also carries the announcements
+        self.lease_pubs = {m: [rospy.Publisher(t, MigrationLease, queue_size=50)
+                               for t in lease_topics(m, 'lease', cfg.lease.paths)] for m in cfg.modules}
         self.event_pub = rospy.Publisher('~events', MigrationEvent, queue_size=100)
         self.placement_pub = rospy.Publisher('~placement', Placement, queue_size=5, latch=True)
         self.control = {(m, h): ControlLink(topic(m, f'{h}/control'), cfg.control_call)
                         for m in cfg.modules for h in cfg.hosts}
         self.agents = {h: rospy.ServiceProxy(f'/migration/agents/{h}/command', AgentCommand) for h in cfg.hosts}
         for m in cfg.modules:
-            rospy.Subscriber(topic(m, 'renew'), MigrationRenew, self._on_renew, queue_size=50)
+            for t in lease_topics(m, 'renew', cfg.lease.paths):
+                rospy.Subscriber(t, MigrationRenew, self._on_renew, queue_size=50)
             rospy.Subscriber(topic(m, 'state'), ModuleState, self._on_state, queue_size=2)
             for h in cfg.hosts:
                 rospy.Subscriber(topic(m, f'{h}/status'), InstanceStatus, self._on_status, queue_size=10)
@@ -134,9 +138,14 @@ class Manager:
         rospy.Service('~migrate', Migrate, self._on_migrate)
 
     # ------------------------------------------------------------------ lease protocol
-    def _answer(self, a: Answer) -> None:
-        self.lease_pubs[a.module].publish(MigrationLease(module=a.module, term=a.term, holder=a.holder,
-                                                         nonce=a.nonce, granted=a.granted, duration=a.duration))
+    def _answer(self, a: Answer, instance: str = '') -> None:
+        """Publish an answer to ``instance``'s request over each of its paths (an instance on the authority's
+        host has one), or an announcement (no instance) over the first."""
+        msg = MigrationLease(module=a.module, term=a.term, holder=a.holder, nonce=a.nonce, granted=a.granted,
+                             duration=a.duration)
+        paths = self.cfg.lease.paths_on(host_of(instance), self.cfg.authority) if instance else 1
+        for pub in self.lease_pubs[a.module][:paths]:
+            pub.publish(msg)
 
     @quiet_at_shutdown
     def _on_renew(self, msg: MigrationRenew) -> None:
@@ -148,10 +157,12 @@ class Manager:
             if msg.term == 0:                 # a standby's request: kept for a promotion's pre-grant
                 book.grantor.standby_request(msg.instance, msg.nonce, now)
                 return
+            if not book.grantor.first_receipt(msg.instance, msg.nonce):
+                return                        # a copy that came over another path: answered already
             a = book.grantor.request(msg.instance, msg.term, msg.nonce, now)
             if a.granted and msg.term not in book.first_grant:
                 book.first_grant[msg.term] = now
-        self._answer(a)
+        self._answer(a, msg.instance)
 
     def _on_state(self, msg: ModuleState) -> None:
         book = self.books.get(msg.module)

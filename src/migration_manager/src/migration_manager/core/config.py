@@ -18,9 +18,19 @@ class LeaseSettings:
     duration: float
     renew_period: float
     margin: float
+    authority_duration: float        # the same two for an instance on the authority's host (no link between it
+    authority_renew_period: float    # and the grantor; its renewals may queue behind the saturated robot's work)
+    paths: int                       # connections an instance on another host sends its renewals and gets its
+                                     # answers over (one stalled by a lost packet does not starve the lease)
 
-    def grantor(self, module: str) -> Grantor:
-        return Grantor(module, self.duration, self.margin)
+    def grantor(self, module: str, authority: str) -> Grantor:
+        return Grantor(module, self.duration, self.margin, host_durations={authority: self.authority_duration})
+
+    def renew_period_on(self, host: str, authority: str) -> float:
+        return self.authority_renew_period if host == authority else self.renew_period
+
+    def paths_on(self, host: str, authority: str) -> int:
+        return 1 if host == authority else self.paths
 
 
 @dataclass(frozen=True)
@@ -63,6 +73,11 @@ def _names(s: Section, key: str, allowed: Tuple[str, ...] = ()) -> Tuple[str, ..
     return tuple(value)
 
 
+def _managed(names: Tuple[str, ...], modules: Tuple[str, ...]) -> Tuple[str, ...]:
+    """The names among the managed modules: a run that manages fewer (two_host --network-aware) ignores the rest."""
+    return tuple(n for n in names if n in modules)
+
+
 def _dormant(s: Section, modules: Tuple[str, ...], hosts: Tuple[str, ...]) -> Dict[str, Tuple[str, ...]]:
     value = s.raw('dormant')
     if not isinstance(value, dict):
@@ -87,10 +102,14 @@ def from_section(s: Section) -> MigrationConfig:
     lease = s.section('lease')
     ls = LeaseSettings(duration=lease.number('duration', positive=True),
                        renew_period=lease.number('renew_period', positive=True),
-                       margin=lease.number('margin', minimum=0.0))
-    if ls.renew_period >= ls.duration / 2:
-        raise lease.error('renew_period', f'must be below half the lease duration ({ls.duration / 2:g} s), '
-                                          f'got {ls.renew_period:g}')
+                       margin=lease.number('margin', minimum=0.0),
+                       authority_duration=lease.number('authority_duration', positive=True),
+                       authority_renew_period=lease.number('authority_renew_period', positive=True),
+                       paths=lease.integer('paths', minimum=1, maximum=8))
+    for period, duration in (('renew_period', ls.duration), ('authority_renew_period', ls.authority_duration)):
+        if getattr(ls, period) >= duration / 2:
+            raise lease.error(period, f'must be below half the lease duration ({duration / 2:g} s), '
+                                      f'got {getattr(ls, period):g}')
     t = s.section('timeouts')
     timeouts = Timeouts(start=t.number('start', positive=True), freeze=t.number('freeze', positive=True),
                         promote=t.number('promote', positive=True), replica=t.number('replica', minimum=0.0))
@@ -105,7 +124,7 @@ def from_section(s: Section) -> MigrationConfig:
         replicate_period_authority=s.number('replicate_period_authority', positive=True),
         replicate_keyframe_every=s.integer('replicate_keyframe_every', minimum=1),
         status_period=s.number('status_period', positive=True),
-        failover=s.boolean('failover'), hot_standby=_names(s, 'hot_standby', modules),
+        failover=s.boolean('failover'), hot_standby=_managed(_names(s, 'hot_standby'), modules),
         dormant=_dormant(s, modules, hosts),
         stop_timeout=agent.number('stop_timeout', positive=True),
         restart_delay=agent.number('restart_delay', minimum=0.0),

@@ -23,6 +23,14 @@ for the current term:
   without a pre-grant that the grantor later rolled back can never produce output, even if the order reaches the
   instance late.
 
+The lease's length may depend on the holder's host (``host_durations``): an instance on the grantor's own host
+never crosses the link, and on a saturated robot its renewal may queue behind bulk work, so it gets a longer
+lease there, while one across the link gets a short one (its failover waits for it to run out). Every answer
+carries the duration it grants, so the holder always counts with the grantor's.
+
+A request may reach the grantor more than once (sent over several connections, so that a stalled one does not
+starve the lease): :meth:`Grantor.first_receipt` tells the first copy from the others, which need no answer.
+
 ``margin`` covers clock *rate* differences (monotonic clocks drift by ppm) and the time the holder needs to stop
 its outputs once its lease ends. These classes hold no ROS types and read no clock: callers pass ``now``
 (monotonic seconds).
@@ -30,6 +38,7 @@ its outputs once its lease ends. These classes hold no ROS types and read no clo
 from __future__ import annotations
 
 import random
+from collections import OrderedDict
 from dataclasses import dataclass, field
 from typing import Dict, Optional, Tuple
 
@@ -60,16 +69,37 @@ class Answer:
 class Grantor:
     """The manager's side for one module."""
 
-    def __init__(self, module: str, duration: float, margin: float, term: int = 0) -> None:
-        if duration <= 0 or margin < 0:
+    RECEIPTS = 256            # requests remembered to tell a copy (another connection's) from a new one
+
+    def __init__(self, module: str, duration: float, margin: float, term: int = 0,
+                 host_durations: Optional[Dict[str, float]] = None) -> None:
+        """``duration``: the lease's length; ``host_durations``: host -> the length for a holder on that host
+        instead."""
+        if duration <= 0 or margin < 0 or any(d <= 0 for d in (host_durations or {}).values()):
             raise ValueError('lease duration must be > 0 and margin >= 0')
         self.module = module
         self.duration = duration
+        self.host_durations = dict(host_durations or {})
         self.margin = margin
+        self.receipts: 'OrderedDict[Tuple[str, int], None]' = OrderedDict()
         self.term = term
         self.holder = ''
         self.valid_until = float('-inf')     # grantor clock: the last holder may be active until then
         self.standby: Dict[str, Tuple[int, float]] = {}     # instance -> (nonce, receipt) of its newest request
+
+    def duration_of(self, instance: str) -> float:
+        """The lease's length for ``instance`` (by its host)."""
+        return self.host_durations.get(host_of(instance), self.duration)
+
+    def first_receipt(self, instance: str, nonce: int) -> bool:
+        """True for the first copy of ``instance``'s request ``nonce`` to arrive, False for a later copy."""
+        key = (instance, nonce)
+        if key in self.receipts:
+            return False
+        self.receipts[key] = None
+        while len(self.receipts) > self.RECEIPTS:
+            self.receipts.popitem(last=False)
+        return True
 
     def free_at(self) -> float:
         """When another instance may be promoted: once every lease granted so far has run out (+ margin)."""
@@ -113,18 +143,20 @@ class Grantor:
         """For a promotion of ``instance`` (the holder, just promoted) sent now: the nonce of its newest standby
         request received within a lease ``duration`` (0: none) and the duration. The lease counts as granted now
         (``valid_until``), so a rollback waits for it to run out."""
+        duration = self.duration_of(instance)
         nonce, received = self.standby.pop(instance, (0, float('-inf')))
-        if instance != self.holder or not nonce or now - received >= self.duration:
-            return 0, self.duration
-        self.valid_until = max(self.valid_until, now + self.duration)
-        return nonce, self.duration
+        if instance != self.holder or not nonce or now - received >= duration:
+            return 0, duration
+        self.valid_until = max(self.valid_until, now + duration)
+        return nonce, duration
 
     def request(self, instance: str, term: int, nonce: int, now: float) -> Answer:
         """A renewal request from ``instance`` for ``term``: granted only to the current holder and term."""
         granted = bool(self.holder) and instance == self.holder and term == self.term
+        duration = self.duration_of(instance)
         if granted:
-            self.valid_until = max(self.valid_until, now + self.duration)
-        return Answer(self.module, self.term, self.holder, nonce, granted, self.duration)
+            self.valid_until = max(self.valid_until, now + duration)
+        return Answer(self.module, self.term, self.holder, nonce, granted, duration)
 
     def announcement(self) -> Answer:
         return Answer(self.module, self.term, self.holder, 0, False, self.duration)
