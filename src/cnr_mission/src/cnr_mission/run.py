@@ -62,6 +62,10 @@ def parse_args(argv: Optional[List[str]] = None) -> argparse.Namespace:
                     'faster (default), 0 as fast as possible; two hosts: 1 only')
     ap.add_argument('--report-dir', type=os.path.realpath, metavar='DIR',
                     help='the report folder, empty or new (default reports/<scenario>-<date>)')
+    ap.add_argument('--view', action='store_true', help="open rviz beside the mission (config/mission.rviz, cnr_viz's "
+                    "markers) when $DISPLAY is set; its last view is saved as view.png in the report")
+    ap.add_argument('--record', action='store_true', help='record the mission into mission.bag in the report '
+                    '(rosbag; the topics of config/viz.yaml record.topics)')
     hosts = ap.add_argument_group('hosts')
     hosts.add_argument('--single-master', action='store_true', help='the single-master mission')
     hosts.add_argument('--two-host', action='store_true', help='robot and cloud on the testbed (root)')
@@ -164,28 +168,72 @@ def run_single_master(args: argparse.Namespace, scenario: str, name: str, map_fi
         raise ScriptError(f'a master already runs at {os.environ["ROS_MASTER_URI"]}; stop it or choose --port')
     rtf = args.rtf if args.rtf is not None else '5'
     try:
-        return _launch_mission(port, scenario, name, map_file, start, rtf, report)
+        return _launch_mission(port, scenario, name, map_file, start, rtf, report, args.view, args.record)
     except Interrupted:
         return EXIT_INTERRUPTED
 
 
 def _launch_mission(port: int, scenario: str, name: str, map_file: str, start: List[str], rtf: str,
-                    report: str) -> int:
+                    report: str, view: bool = False, record: bool = False) -> int:
     x, y, a = start
     with Processes() as procs:
         procs.ensure_master(PROG, port)
         log(PROG, f'scenario {name} ({scenario}), real-time factor {rtf}, report in {report}')
+        viewer = start_viewer(procs, scenario, report, view, record)
         # cnr_launch: roslaunch that ends at once with exit 2 when a node reports a configuration error, and ends
         # quietly when the mission monitor is done (its exit status: 0 hotspot found, 3 not found)
         launch = procs.start(['rosrun', 'cnr_bringup', 'cnr_launch', '--until', 'mission_monitor', 'cnr_mission',
                               'mission.launch', 'monitor_required:=false', f'scenario_file:={scenario}',
                               f'map:={map_file}', f'x:={x}', f'y:={y}', f'a:={a}', f'real_time_factor:={rtf}',
-                              f'report_dir:={report}', f'store:={report}/store.tsv'],
+                              f'report_dir:={report}', f'store:={report}/store.tsv',
+                              f'viz:={str(view or record).lower()}'],
                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, errors='replace')
         for line in launch.stdout:
             if not NOISE.match(line):
                 print(line, end='', flush=True)
-        return launch.wait()
+        status = launch.wait()
+        if viewer:
+            save_view(viewer, report)
+        return status
+
+
+def start_viewer(procs: Processes, scenario: str, report: str, view: bool, record: bool) -> Optional[Tuple]:
+    """``--record``: rosbag records the mission into the report; ``--view``: rviz opens beside it when there is a
+    display (else one line why not). The rviz process and its window title, to save its view at the end."""
+    from cnr_viz import viewer
+    config_dir = os.path.join(WS, 'config')
+    logs = os.path.join(report, 'logs')
+    if record:
+        os.makedirs(logs, exist_ok=True)
+        with open(os.path.join(logs, 'rosbag_record.log'), 'w') as out:
+            procs.start(viewer.record_argv(config_dir, report), stdout=out, stderr=subprocess.STDOUT)
+        log(PROG, f'recording the mission into {os.path.join(report, viewer.BAG)}')
+    if not view:
+        return None
+    display = os.environ.get('DISPLAY', '')
+    why = viewer.display_problem(display)
+    if why:
+        log(PROG, f'--view: rviz not opened: {why}; the markers are on /viz_markers/markers')
+        return None
+    os.makedirs(logs, exist_ok=True)
+    rviz_cfg, _, view_cfg = viewer.write_rviz_config(config_dir, scenario, logs)
+    with open(os.path.join(logs, 'rviz.log'), 'w') as out:
+        rviz = procs.start(viewer.rviz_argv(rviz_cfg), stdout=out, stderr=subprocess.STDOUT)
+    log(PROG, f'--view: rviz on {display} ({rviz_cfg})')
+    return rviz, display, view_cfg.window_title
+
+
+def save_view(viewer_state: Tuple, report: str) -> None:
+    """rviz's last view (it keeps the markers after the mission's nodes stopped) as view.png in the report."""
+    from cnr_viz.viewer import screenshot
+    rviz, display, title = viewer_state
+    if rviz.poll() is not None:
+        log(PROG, f'--view: rviz ended (status {rviz.returncode}) before the mission; no view.png')
+        return
+    try:
+        log(PROG, f'--view: the last view saved as {screenshot(display, title, report)}')
+    except Exception as exc:      # Xlib raises its own classes; the report stands without the picture
+        log(PROG, f'--view: no view.png ({exc})')
 
 
 def outcome(status: int, report: str) -> int:

@@ -1,0 +1,73 @@
+"""What ``run_mission.sh --view`` and ``--record`` start beside the mission (no ROS imports: processes only).
+
+* :func:`display_problem`: why rviz cannot be opened here ('' when it can): no ``$DISPLAY``, no rviz, or a
+  display that does not answer;
+* :func:`write_rviz_config`: ``config/mission.rviz`` centred on the scenario's mapcell grid, written into the
+  report folder (the view the screenshot shows);
+* :func:`rviz_argv`, :func:`record_argv`: the commands (Debian's rviz, ``rosbag record`` of
+  ``viz.record.topics`` into the report);
+* :func:`screenshot`: rviz's window as ``view.png`` in the report.
+"""
+from __future__ import annotations
+
+import os
+import shutil
+from typing import List, Tuple
+
+from cnr_maps.grid import MapcellGrid
+from cnr_params import Section
+from cnr_viz.core.view import TopDownView, ViewConfig, fit, rviz_config
+
+RVIZ_CONFIG = 'mission.rviz'
+SCREENSHOT = 'view.png'
+BAG = 'mission.bag'
+
+
+def display_problem(display: str) -> str:
+    """'' when rviz can open a window on ``display``, else why not (one line)."""
+    if not display:
+        return 'no display ($DISPLAY is not set)'
+    if shutil.which('rviz') is None:
+        return 'rviz is not installed (Debian package rviz; launch_scripts/setup.sh installs it)'
+    from cnr_viz.screenshot import window_present
+    if window_present(display, '') is None:
+        return f'the display {display} does not answer'
+    return ''
+
+
+def write_rviz_config(config_dir: str, scenario_file: str, out_dir: str) -> Tuple[str, TopDownView, ViewConfig]:
+    """``config/mission.rviz`` with its view fitted to the scenario's grid, as ``out_dir/mission.rviz``."""
+    cfg = ViewConfig.from_section(Section.from_file(os.path.join(config_dir, 'viz.yaml')))
+    grid = MapcellGrid.from_section(Section.from_file(scenario_file).section('mapcells'))
+    view = fit(grid, cfg)
+    with open(os.path.join(config_dir, RVIZ_CONFIG)) as f:
+        text = rviz_config(f.read(), view)
+    path = os.path.join(out_dir, RVIZ_CONFIG)
+    with open(path, 'w') as f:
+        f.write(text)
+    return path, view, cfg
+
+
+def rviz_argv(config: str) -> List[str]:
+    return ['rviz', '-d', config]
+
+
+def record_topics(config_dir: str) -> List[str]:
+    sec = Section.from_file(os.path.join(config_dir, 'viz.yaml')).section('viz').section('record')
+    topics = sec.raw('topics')
+    if not isinstance(topics, list) or not topics or not all(isinstance(t, str) and t.startswith('/') for t in topics):
+        raise sec.error('topics', f'expected a list of topic names, got {topics!r}')
+    return topics
+
+
+def record_argv(config_dir: str, report_dir: str) -> List[str]:
+    """``rosbag record`` of the mission's topics into ``report_dir/mission.bag`` (SIGINT closes the bag)."""
+    return ['rosbag', 'record', '--quiet', '-O', os.path.join(report_dir, BAG), *record_topics(config_dir)]
+
+
+def screenshot(display: str, title: str, report_dir: str) -> str:
+    """rviz's window as ``report_dir/view.png``; the path."""
+    from cnr_viz.screenshot import grab
+    path = os.path.join(report_dir, SCREENSHOT)
+    grab(display, title, path)
+    return path
