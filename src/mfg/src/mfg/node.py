@@ -19,14 +19,12 @@ from typing import Any, Callable, Dict, Optional, Tuple
 import actionlib
 import rospy
 from actionlib_msgs.msg import GoalStatus
-from geometry_msgs.msg import Quaternion
-from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
+from move_base_msgs.msg import MoveBaseAction
 from nav_msgs.msg import Odometry
 
 import cnr_params
 from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, MfgActivity, SearchState
 from cnr_maps.grid import MapcellGrid
-from cnr_maps.pose import yaw_to_quaternion
 from cnr_msgs.srv import NextGoal, NextGoalResponse
 from cnr_params.ros import private_section
 from cnr_runtime import init_node
@@ -34,6 +32,7 @@ from mfg.core.fallback import LocalGoals
 from mfg.core.memory import Goal, Memory
 from mfg.core.params import MfgParams, read_params
 from mfg.core.search import HotspotSearch
+from mfg.goals import facing_away, move_base_goal, unacknowledged
 from migration_manager.client import MovableServiceProxy
 from migration_manager.instance import Hooks, ManagedInstance
 
@@ -201,8 +200,7 @@ class MfgNode(Hooks):
     def new_goal(self, cell: int, interruptible: bool, kind: str, xy: Optional[Tuple[float, float]] = None) -> Goal:
         """A goal to ``cell``'s centre (or ``xy``), facing away from the robot."""
         x, y = xy if xy is not None else self.cell_centre(cell)
-        yaw = math.atan2(y - self.pose[1], x - self.pose[0]) if self.pose is not None else 0.0
-        return Goal(x, y, yaw, cell, interruptible, kind, rospy.Time.now().to_sec())
+        return Goal(x, y, facing_away(self.pose, x, y), cell, interruptible, kind, rospy.Time.now().to_sec())
 
     def drive(self, goal: Goal, epoch: int) -> str:
         """Drive to ``goal``; returns 'succeeded', 'failed', 'interrupted' (abnormal value while patrolling) or
@@ -211,14 +209,14 @@ class MfgNode(Hooks):
             if self.epoch != epoch:
                 return 'stopped'
             self.memory.goal = goal            # before it is sent: a state taken from now on holds it
-        target = MoveBaseGoal()
-        target.target_pose.header.frame_id = self.p.frame_id
-        target.target_pose.pose.position.x, target.target_pose.pose.position.y = goal.x, goal.y
-        target.target_pose.pose.orientation = Quaternion(*yaw_to_quaternion(goal.yaw))
+        target = move_base_goal(goal.x, goal.y, goal.yaw, self.p.frame_id)
+        sent_wall = time.monotonic()
 
         def send() -> None:
+            nonlocal sent_wall
             target.target_pose.header.stamp = rospy.Time.now()
             self.client.send_goal(target)
+            sent_wall = time.monotonic()
         if not self._output(epoch, send):
             return 'stopped'
         # the timeout counts from this instance's send: a goal handed over (sent earlier by another instance)
@@ -226,11 +224,17 @@ class MfgNode(Hooks):
         deadline = max(goal.sent, rospy.Time.now().to_sec()) + self.p.goal_timeout
         while self._live(epoch):
             if self.client.wait_for_result(rospy.Duration(0.1)):
-                return 'succeeded' if self.client.get_state() == GoalStatus.SUCCEEDED else 'failed'
+                return self._outcome(goal)
             # the server's status list says the goal ended, but its result never came: it was published while
             # the link was down (results are not latched; the status is repeated) - the goal is over all the same
             if self.client.get_state() in _TERMINAL:
-                return 'succeeded' if self.client.get_state() == GoalStatus.SUCCEEDED else 'failed'
+                return self._outcome(goal)
+            # move_base never listed the goal: it was lost on its way (actionlib sends a goal once; an outage
+            # swallows it). The same goal again, as a new one
+            if unacknowledged(self.client) and time.monotonic() - sent_wall > self.p.goal_ack_timeout:
+                if self._output(epoch, send, wait=False):
+                    rospy.logwarn(f'move_base did not acknowledge the goal to cell {goal.cell} within '
+                                  f'{self.p.goal_ack_timeout:g} s: sent again')
             # an interruption or a timeout cancels the goal only while the outputs are open (not in a lapse)
             if goal.interruptible and self.memory.trigger is not None:
                 if self._output(epoch, self.client.cancel_goal, wait=False):
@@ -239,6 +243,20 @@ class MfgNode(Hooks):
                 if self._output(epoch, self.client.cancel_goal, wait=False):
                     return 'failed'
         return 'stopped'
+
+    def _outcome(self, goal: Goal) -> str:
+        """'succeeded' or 'failed' for a goal that ended. A goal LOST (move_base's status list stopped listing it:
+        it ended while the link was down, longer ago than the list keeps ended goals) counts as reached when the
+        robot is in the goal's cell."""
+        state = self.client.get_state()
+        if state == GoalStatus.SUCCEEDED:
+            return 'succeeded'
+        if state == GoalStatus.LOST and self.pose is not None:
+            with self.lock:
+                grid = self.memory.grid
+            if grid is not None and grid.index_of(*self.pose) == goal.cell:
+                return 'succeeded'
+        return 'failed'
 
     def measure(self, cell: int, epoch: int) -> Optional[float]:
         """Average temperature in ``cell`` after settling: NaN if nothing could be measured, None if the epoch

@@ -20,6 +20,7 @@ class MfgParams:
     min_measurements: int
     measure_timeout: float       # s
     goal_timeout: float          # s
+    goal_ack_timeout: float      # wall s before a goal move_base has not acknowledged is sent again
     next_goal_service: str
     next_goal_timeout: float     # wall s to wait for the global goal manager before the robot's own goal
     pose_topic: str
@@ -39,6 +40,7 @@ def read_params(p: Section) -> MfgParams:
                      min_measurements=m.integer('min_measurements', minimum=1),
                      measure_timeout=m.number('measure_timeout', positive=True),
                      goal_timeout=m.number('goal_timeout', positive=True),
+                     goal_ack_timeout=m.number('goal_ack_timeout', positive=True),
                      next_goal_service=m.string('next_goal_service'),
                      next_goal_timeout=m.number('next_goal_timeout', positive=True),
                      pose_topic=m.string('pose_topic'),
