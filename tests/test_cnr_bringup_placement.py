@@ -117,6 +117,12 @@ def test_managed_modules_cross_from_either_host_and_are_started_by_the_agents(ca
     assert 'mfg:=true' not in args and 'global_goal_manager:=true' not in args and 'move_base:=true' not in args
     assert 'merger:=true' in launch_args(p, 'robot')
     lmm = catalog.placement('monitoring_cloud')
-    assert lmm.relayed() and not lmm.managed_by(['local_mapcell_manager']).relayed()
+    assert lmm.relayed()
+    # a movable store may be on the cloud at any time: the relay carries its input wherever it starts
+    for name in ('monitoring_cloud', 'all_robot'):
+        managed = catalog.placement(name).managed_by(['local_mapcell_manager'])
+        assert [s.topic for s in managed.relayed()] == ['/merged_measurements']
+        assert '/merged_measurements' not in managed.allow('topics')
+        assert '/store_forward/merged_measurements/*' in managed.allow('topics')
     with pytest.raises(ValueError, match='not movable'):
         p.managed_by(['kestrel_driver'])

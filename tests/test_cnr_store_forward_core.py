@@ -12,7 +12,7 @@ from cnr_params import ConfigError, Section
 from cnr_store_forward.core import config as sf_config
 from cnr_store_forward.core.queue import (RECORD_HEADER, SEGMENT_HEADER, DiskQueue, QueueCorrupt, QueueLocked,
                                           frame)
-from cnr_store_forward.core.receiver import Receiver
+from cnr_store_forward.core.receiver import Receiver, parse_mark
 from cnr_store_forward.core.sender import Sender, SenderSettings
 
 WS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -134,6 +134,50 @@ def test_segments_roll_and_acknowledged_ones_are_compacted(tmp_path):
     q = open_queue(tmp_path)
     assert (q.acked, q.last_seq) == (40, 40) and q.append(b'a', 0) == 41
     q.close()
+
+
+def test_acknowledged_records_are_retained_and_the_floor_says_what_is_gone(tmp_path):
+    q = DiskQueue(str(tmp_path), 1000, 1 << 20, 500, False, retain_records=10)
+    for i in range(1, 41):
+        q.append(b'z' * 50, i)                       # 7 records a segment: 1-7, 8-14, 15-21, ...
+    q.ack(20)
+    assert q.floor == 7 and q.records(8, 9, 10, 1 << 20)[0].seq == 8        # 8..20 kept: 10 acked ones follow 7
+    q.ack(40)
+    assert q.floor == 28 and q.unacked == 0                                  # whole segments only
+    q.close()
+    q = DiskQueue(str(tmp_path), 1000, 1 << 20, 500, False, retain_records=10)
+    assert (q.floor, q.acked, q.last_seq) == (28, 40, 40)
+    q.close()
+
+
+def test_a_receiver_that_acks_less_gets_everything_after_its_ack_again(tmp_path):
+    """A consumer promoted with an older mark acknowledges less than the one before it: the sender goes back
+    to its ack (not below the floor) and sends the rest again; the next ack moves on as usual."""
+    q = DiskQueue(str(tmp_path), 1000, 1 << 20, 500, False, retain_records=10)
+    s = Sender(q, SenderSettings(window=50, batch_records=50, batch_bytes=1 << 20, ack_timeout=1.0, max_backoff=4.0))
+    for i in range(1, 31):
+        q.append(payload(i), i)
+    assert [r.seq for r in s.poll(0.0)] == list(range(1, 31))
+    assert s.on_ack(q.epoch, 30, 0.1) == 30 and s.pending == 0 and s.poll(0.2) == []
+    s.on_ack(q.epoch, 25, 0.3)                       # a new receiver holds up to 25
+    assert (s.base, s.rewinds, s.pending) == (25, 1, 5) and [r.seq for r in s.poll(0.4)] == [26, 27, 28, 29, 30]
+    s.on_ack(q.epoch, 30, 0.5)
+    assert s.pending == 0 and q.acked == 30
+    s.on_ack(q.epoch, 2, 0.6)                        # below what the queue still holds: from the floor on
+    assert s.base == q.floor > 2 and s.poll(0.7)[0].seq == q.floor + 1
+    q.close()
+
+
+def test_a_receivers_mark_travels_and_is_checked(tmp_path):
+    a = Receiver(str(tmp_path / 'a.json'), fsync=False)
+    a.plan(7, 0, [1, 2, 3])
+    a.commit(3)
+    b = Receiver(str(tmp_path / 'b.json'), fsync=False)
+    b.adopt(a.mark())
+    assert (b.epoch, b.delivered) == (7, 3) and Receiver(str(tmp_path / 'b.json'), fsync=False).delivered == 3
+    assert b.plan(7, 0, [2, 3, 4]).start == 2
+    with pytest.raises(ValueError, match='relay.delivered'):
+        parse_mark({'epoch': 7, 'delivered': -1, 'retired': []})
 
 
 def test_losing_the_acked_mark_only_means_resending(tmp_path):
@@ -330,7 +374,7 @@ def run_stream(tmp_path, seed: int, records: int, restarts: bool) -> Tuple[List[
             receiver = Receiver(state, fsync=False)
         batch = sender.poll(now)
         if batch:
-            data_link.send(now, (q.epoch, q.acked, batch))
+            data_link.send(now, (q.epoch, q.floor, batch))
         for epoch, acked, recs in data_link.arrived(now):
             plan = receiver.plan(epoch, acked, [r.seq for r in recs])
             delivered.extend(r.data for r in recs[plan.start:])

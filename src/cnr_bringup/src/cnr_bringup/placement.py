@@ -58,8 +58,9 @@ class Placement:
 
     def managed_by(self, modules) -> 'Placement':
         """This placement as the *start* of a run in which ``modules`` may migrate: they count as present on
-        every host for the bridges, no store-and-forward relay serves them (the stream's consumer may move),
-        and the launch files do not start them (the migration agents do)."""
+        every host for the bridges, a store-and-forward stream whose consumer is one of them is relayed (the
+        consumer may be on the cloud at any time), and the launch files do not start them (the migration agents
+        do)."""
         unknown = [m for m in modules if m not in self.catalog.movable]
         if unknown:
             raise ValueError(f"not movable: {', '.join(unknown)} (movable: {', '.join(self.catalog.movable)})")
@@ -80,10 +81,11 @@ class Placement:
         return any(h != self.catalog.hosts[0] for h in self.hosts.values())
 
     def relayed(self) -> List[Stream]:
-        """The store-and-forward streams this placement needs (producer on the robot, consumer elsewhere)."""
+        """The store-and-forward streams this placement needs: producer on the robot (never moved), consumer
+        elsewhere or movable."""
         robot = self.catalog.hosts[0]
-        return [s for s in self.catalog.streams if self.hosts[s.producer] == robot and self.hosts[s.consumer] != robot
-                and s.producer not in self.managed and s.consumer not in self.managed]
+        return [s for s in self.catalog.streams if self.hosts[s.producer] == robot and s.producer not in self.managed
+                and (self.hosts[s.consumer] != robot or s.consumer in self.managed)]
 
     def allow(self, kind: str) -> List[str]:
         """Names of ``kind`` (topics/services) that cross the link: used on more than one host."""

@@ -71,7 +71,6 @@ class ReceiverNode:
     def on_batch(self, batch: StoreForwardBatch) -> None:
         if batch.stream != self.cfg.common.stream or not batch.type:
             return
-        ack = None
         with self.lock:
             self.seen = (batch.epoch, batch.acked_seq)
             pub = self.output((batch.type, batch.md5sum))
@@ -88,10 +87,8 @@ class ReceiverNode:
             finally:                        # also when publishing fails at shutdown: commit what went out
                 if published:
                     self.commit(published)
-            if plan.ack:
-                ack = self.ack()
-        if ack is not None:
-            self.ack_pub.publish(ack)
+            if plan.ack:                    # under the lock: acks go out in the order of the marks they carry
+                self.ack_pub.publish(self.ack())
 
     def ack(self) -> StoreForwardAck:
         return StoreForwardAck(stream=self.cfg.common.stream, epoch=self.receiver.epoch,
@@ -111,8 +108,8 @@ class ReceiverNode:
                 ack = StoreForwardAck(stream=self.cfg.common.stream, epoch=epoch, acked_seq=sender_ack)
             elif ready and self.receiver.epoch:
                 ack = self.ack()
-        if ack is not None:
-            self.ack_pub.publish(ack)
+            if ack is not None:             # (a lower ack after a higher one would make the sender go back)
+                self.ack_pub.publish(ack)
 
     def commit(self, seq: int) -> None:
         try:

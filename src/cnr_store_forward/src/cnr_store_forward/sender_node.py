@@ -32,7 +32,8 @@ class SenderNode:
         self.stop = threading.Event()
         self.failed = ''
         self.closed = False
-        self.queue = q = DiskQueue(cfg.stream_dir, cfg.max_records, cfg.max_bytes, cfg.segment_bytes, cfg.fsync)
+        self.queue = q = DiskQueue(cfg.stream_dir, cfg.max_records, cfg.max_bytes, cfg.segment_bytes, cfg.fsync,
+                                   cfg.retain_records)
         r = q.recovery
         pending = f'seq {q.acked + 1}..{q.last_seq} unacked' if q.unacked else f'next seq {q.last_seq + 1}'
         rospy.loginfo(f'store_forward sender {cfg.common.stream}: queue {cfg.stream_dir} '
@@ -102,7 +103,12 @@ class SenderNode:
         with self.lock:
             if self.closed:
                 return
+            rewinds = self.sender.rewinds
             self.sender.on_ack(msg.epoch, msg.acked_seq, time.monotonic())
+            if self.sender.rewinds != rewinds:
+                rospy.loginfo(f'store_forward sender {self.cfg.common.stream}: {msg._connection_header.get("callerid")} '
+                              f'acknowledged up to seq {msg.acked_seq} only: sending from seq '
+                              f'{self.sender.base + 1} again')
             self.report_full()
 
     def report_full(self) -> None:
@@ -122,18 +128,18 @@ class SenderNode:
     # ---------------------------------------------------------------- sending
     def batch(self, records: List[Record]) -> StoreForwardBatch:
         return StoreForwardBatch(
-            stream=self.cfg.common.stream, epoch=self.queue.epoch, acked_seq=self.queue.acked,
+            stream=self.cfg.common.stream, epoch=self.queue.epoch, acked_seq=self.queue.floor,
             type=self.type[0], md5sum=self.type[1],
             records=[StoreForwardRecord(seq=r.seq, stamp=ros_time(r.stamp_ns), data=r.data) for r in records])
 
     def status(self) -> StoreForwardStatus:
         q, s = self.queue, self.sender
         age = math.nan
-        if q.unacked:
-            age = (time.time_ns() - q.stamp_of(q.acked + 1)) / 1e9
+        if s.pending:
+            age = (time.time_ns() - q.stamp_of(s.base + 1)) / 1e9
         msg = StoreForwardStatus(
             stream=self.cfg.common.stream, role=StoreForwardStatus.SENDER, epoch=q.epoch, type=self.type[0],
-            last_seq=q.last_seq, acked_seq=q.acked, queued=q.unacked, queued_bytes=q.unacked_bytes,
+            last_seq=q.last_seq, acked_seq=s.base, queued=s.pending, queued_bytes=q.unacked_bytes,
             in_flight=s.in_flight, appended=q.appended, sent=s.sent, resent=s.resent, timeouts=s.timeouts, full=q.full,
             rejected=q.rejected + self.type_rejected, ignored=self.ignored, oldest_unacked_age=age)
         msg.header.stamp = ros_time(time.time_ns())

@@ -18,6 +18,7 @@ from cnr_params.ros import private_section
 from cnr_runtime import init_node
 from local_mapcell_manager.core.ledger import Prepared, state_newest
 from local_mapcell_manager.core.params import read_params
+from local_mapcell_manager.core.relay import STATE_KEY, state_mark
 from local_mapcell_manager.core.store import MeasurementStore
 from local_mapcell_manager.node import ManagerNode, StoreHooks
 from migration_manager.instance import Retiring
@@ -43,7 +44,10 @@ class StoreMigration(StoreHooks):
         announcements say (term 0: never promoted): not ready before one has arrived. Once a term has been
         announced a merger runs: a standby whose master does not list it (e.g. on the cloud just after an
         outage, before the bridge has restored the registration) is not ready, or what the merger publishes
-        until it connects would reach no store."""
+        until it connects would reach no store. Through the relay: always ready (the sender keeps what no
+        active instance acknowledged and sends it again to the one promoted)."""
+        if self.node.relay is not None:
+            return self.node.instance is not None
         sub, instance = self.node.sub, self.node.instance
         if sub is None or instance is None:
             return False
@@ -61,12 +65,16 @@ class StoreMigration(StoreHooks):
         node = self.node
         with node.instance.lock, node.lock:            # (reentrant: a freeze calls this holding instance.lock)
             node._sync_frozen()
-            return node.ledger.state()
+            state = node.ledger.state()
+            if node.relay is not None:                  # the mark that matches this store
+                state[STATE_KEY] = node.relay.mark()
+            return state
 
     def set_state(self, state: Dict[str, Any]) -> None:
         node = self.node
+        mark = state_mark(state) if node.relay is not None else None      # ValueError: refused
         with node.lock:
-            since = node.ledger.missing_since(state_newest(state))
+            since = None if mark is not None else node.ledger.missing_since(state_newest(state))
         recovered = node._recover(since)
         with node.lock, self.prepare_lock:
             added = node.ledger.recover(recovered)
@@ -74,8 +82,11 @@ class StoreMigration(StoreHooks):
             self.prepared = None
             node._dirty = True
             count = node.ledger.count
+            if mark is not None:
+                node.relay.adopt(mark)                  # acknowledged from here once active: the rest comes again
         ahead = 'restored whole' if replay.prepared is None else f'{replay.prepared} prepared ahead'
-        rospy.loginfo(f'state taken over: {count} measurements ({ahead}); '
+        relay = '' if mark is None else f'relay mark: epoch {mark["epoch"]}, up to seq {mark["delivered"]}; '
+        rospy.loginfo(f'state taken over: {count} measurements ({ahead}); {relay}'
                       f'{node._recovered(since, recovered, added)}{node._replayed(replay)}')
 
     def prepare_state(self, state: Dict[str, Any]) -> None:

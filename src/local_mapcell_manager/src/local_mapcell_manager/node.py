@@ -3,7 +3,8 @@
 Movable by migration_manager: the node is built with the managed instance's hooks (:class:`StoreHooks`, those of
 :mod:`local_mapcell_manager.migration`, which also holds the executable's ``main``). As a standby the node
 buffers ``merged_measurements`` but stores, publishes and serves nothing; once active (:meth:`ManagerNode.activate`)
-it stores, publishes and serves (README "Migration state")."""
+it stores, publishes and serves (README "Migration state"). With ``~relay_stream`` set its input is the
+store-and-forward relay instead, which it acknowledges itself while active (README "Input through the relay")."""
 from __future__ import annotations
 
 import math
@@ -14,14 +15,16 @@ from typing import Callable, List, Optional
 import rospy
 
 from cnr_msgs.msg import CellState as CellStateMsg
-from cnr_msgs.msg import CellStates, MergedMeasurement
+from cnr_msgs.msg import CellStates, MergedMeasurement, StoreForwardAck, StoreForwardBatch
 from cnr_msgs.srv import (GetCell, GetCellResponse, GetCellStates, GetCellStatesResponse, GetMeasurements,
                           GetMeasurementsResponse, GetRecentMeasurements)
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.measurements import Measurement
 from cnr_runtime import call_with_timeout, quiet_at_shutdown
+from cnr_store_forward.core.receiver import Receiver
 from local_mapcell_manager.core.ledger import DUPLICATE, Ledger, Reading, Replay
 from local_mapcell_manager.core.params import ManagerParams
+from local_mapcell_manager.core.relay import mark_path, take_batch
 from local_mapcell_manager.core.store import CellBook, MeasurementStore
 from migration_manager import client
 from migration_manager.instance import Hooks, ManagedInstance
@@ -55,9 +58,11 @@ class ManagerNode:
         self.p = p
         self.grid = p.grid
         self.lock = threading.Lock()
-        if p.reset_store and os.path.exists(p.store):
-            os.replace(p.store, p.store + '.old')
-            rospy.loginfo(f'reset_store: moved the previous store to {p.store}.old')
+        if p.reset_store:
+            for path in (p.store, mark_path(p.store)):
+                if os.path.exists(path):
+                    os.replace(path, path + '.old')
+                    rospy.loginfo(f'reset_store: moved the previous {path} to {path}.old')
         store = MeasurementStore(p.store, rospy.logwarn)
         for path in store.remove_stale_drafts():
             rospy.logwarn(f'removed {path}: a draft of the store left by an instance that ended before using it')
@@ -66,8 +71,15 @@ class ManagerNode:
         rospy.loginfo(f'{len(self.grid)} mapcells ({self.grid.cols} x {self.grid.rows} of {self.grid.cell_size:g} m); '
                       f'{self.ledger.count} stored measurements reloaded from {p.store}')
         self._dirty = True
+        # the relay's receiving end (None: merged_measurements subscribed directly); its mark lies next to the store
+        self.relay: Optional[Receiver] = Receiver(mark_path(p.store), p.relay.fsync) if p.relay else None
+        self.relay_held = 0                             # batches not taken: not the active instance
+        if self.relay is not None:
+            rospy.loginfo(f'input: store-and-forward stream {p.relay.common.stream}; delivered mark '
+                          f'{mark_path(p.store)}: epoch {self.relay.epoch}, up to seq {self.relay.delivered}')
+        # what the relay replays makes the merger's retention unnecessary (README "Recovery")
         self.recover_proxy = (rospy.ServiceProxy(p.recover_service, GetRecentMeasurements)
-                              if p.recover_service else None)
+                              if p.recover_service and self.relay is None else None)
         self.services: list = []
         self._constructed = threading.Event()          # on_active (instance thread) waits for the publishers
         self.instance: Optional[ManagedInstance] = None
@@ -76,7 +88,16 @@ class ManagerNode:
         # reports ready only once its merged_measurements subscription is connected (hooks.standby_ready), so the
         # manager never freezes the active instance before this one buffers what follows
         self.instance = ManagedInstance('local_mapcell_manager', self.migration)
-        self.sub = rospy.Subscriber('merged_measurements', MergedMeasurement, self._on_measurement, queue_size=100)
+        self.stop = threading.Event()
+        if self.relay is None:
+            self.sub = rospy.Subscriber('merged_measurements', MergedMeasurement, self._on_measurement,
+                                        queue_size=100)
+        else:
+            self.ack_pub = rospy.Publisher(p.relay.common.topic('ack'), StoreForwardAck, queue_size=50)
+            self.relay_sub = rospy.Subscriber(p.relay.common.topic('data'), StoreForwardBatch, self._on_batch,
+                                              queue_size=50)
+            rospy.on_shutdown(self.stop.set)
+            threading.Thread(target=self._repeat_ack, name='relay_ack', daemon=True).start()
         # created now, used once active: subscribers are connected by the time the pending ones are published
         self.pub: Optional[rospy.Publisher] = self.instance.publisher('cell_states', CellStates, queue_size=1,
                                                                       latch=True)
@@ -138,6 +159,7 @@ class ManagerNode:
         with self.instance.lock:                        # the waiting measurements first: the hand-over's
             with self.lock:                             # output gap ends here
                 self._flush()
+                self._ack()                             # the relay sends what follows the mark (again)
             self._publish(force=True)
 
     def open_services(self) -> None:
@@ -169,6 +191,76 @@ class ManagerNode:
     def _replayed(r: Replay) -> str:
         return (f'replayed {r.buffered} buffered measurement(s): {r.stored} new, {r.known} already stored, '
                 f'{r.outside} outside the grid')
+
+    # -- the relay (README "Input through the relay") ------------------------------------------------
+    def _taking(self) -> bool:
+        """Under both locks: may this instance take (store and acknowledge) the relay's batches now? Only the
+        active one, storing: a standby, a frozen instance or one whose lease lapsed leaves them to the sender."""
+        self._sync_frozen()
+        return self.relay is not None and self.instance.active and self.ledger.storing
+
+    def _ack(self) -> None:
+        """Under both locks: acknowledge the delivered mark (active only; none before the first batch). Acks go
+        out under the lock, in the order of the marks: a lower one after a higher one would make the sender go
+        back."""
+        if self._taking() and self.relay.epoch:
+            self.ack_pub.publish(StoreForwardAck(stream=self.p.relay.common.stream, epoch=self.relay.epoch,
+                                                 acked_seq=self.relay.delivered))
+
+    def _repeat_ack(self) -> None:
+        """Repeat the ack every ack_period while active: the sender learns at once that the link (or a newly
+        promoted instance) is there, and where this instance's mark is."""
+        self._constructed.wait()
+        while not self.stop.wait(self.p.relay.ack_period) and not rospy.is_shutdown():
+            try:
+                with self.instance.lock, self.lock:
+                    self._ack()
+            except rospy.ROSException:
+                if rospy.is_shutdown():
+                    return
+                raise
+
+    @quiet_at_shutdown
+    def _on_batch(self, batch: StoreForwardBatch) -> None:
+        stream = self.p.relay.common.stream
+        if batch.stream != stream or not batch.records:
+            return
+        if (batch.type, batch.md5sum) != (MergedMeasurement._type, MergedMeasurement._md5sum):
+            rospy.logerr_throttle(10.0, f'store_forward stream {stream}: batches of {batch.type} ({batch.md5sum}), '
+                                        f'not {MergedMeasurement._type}: not taken')
+            return
+        readings = [(r.seq, self._decode(r.data)) for r in batch.records]
+        self._constructed.wait()
+        with self.instance.lock, self.lock:
+            if not self._taking():
+                self.relay_held += 1
+                return
+            try:
+                taken = take_batch(self.relay, self.ledger, batch.epoch, batch.acked_seq, readings)
+            except OSError as exc:
+                rospy.logerr_throttle(10.0, f'cannot store the relay\'s measurements ({exc}): not acknowledged, '
+                                            f'they come again')
+                return
+            if taken.skipped:
+                rospy.logwarn(f'store_forward stream {stream}: the sender no longer holds {taken.skipped} record(s) '
+                              f'before seq {self.relay.delivered + 1}: any of them this store lacks are missing')
+            if taken.duplicates:
+                rospy.logwarn_throttle(5.0, f'ignored {self.ledger.duplicates} measurement(s) older than or equal '
+                                            f'to the newest stored one (sent again by the relay)')
+            if taken.stored:
+                self._dirty = True
+                self._flush()
+            if taken.ack:
+                self._ack()
+
+    def _decode(self, data) -> Optional[Reading]:
+        msg = MergedMeasurement()
+        try:
+            msg.deserialize(bytes(data))
+        except Exception as exc:                     # genpy.DeserializationError, struct.error
+            rospy.logerr_throttle(10.0, f'a relayed record is not a MergedMeasurement ({exc}): skipped')
+            return None
+        return self._reading(msg)
 
     # -- the stream --------------------------------------------------------------------------------
     @quiet_at_shutdown

@@ -31,6 +31,7 @@ class SenderConfig:
     fsync: bool
     sync_period: float          # [s] appended records are synced (and then sendable) this often
     rate: float                 # [Hz] batches sent at most
+    retain_records: int         # acknowledged records kept on disk at least (sent again to a receiver behind)
     settings: SenderSettings
 
     @property
@@ -92,6 +93,7 @@ def sender_from_section(s: Section) -> SenderConfig:
         fsync=p.boolean('fsync'),
         sync_period=p.number('sync_period', nonnegative=True),
         rate=p.number('rate', positive=True),
+        retain_records=p.integer('retain_records', minimum=0),
         settings=SenderSettings(
             window=p.integer('window', minimum=1),
             batch_records=p.integer('batch_records', minimum=1),

@@ -17,7 +17,10 @@ sequence; every record before it is intact. Damage anywhere else is not a torn w
 :class:`QueueCorrupt`. Sequence numbers start at 1, increase by one and are never reused within an epoch,
 also across restarts (they continue from the segments; the newest segment is never deleted).
 
-Acknowledged records are compacted by deleting whole segments; the acked mark is written atomically with
+Acknowledged records are compacted by deleting whole segments, but only once at least ``retain_records``
+newer records have been acknowledged too: the newest acknowledged records stay on disk (:attr:`DiskQueue.floor`
+is the last record no longer held), so a receiver that acknowledges less than an earlier one did (a store
+instance promoted with an older state) can be sent them again. The acked mark is written atomically with
 every acknowledgement and durably (fsync) before a segment is deleted. A stale mark after a power loss
 only means some records are sent again, which the receiver drops as duplicates.
 
@@ -153,6 +156,8 @@ class DiskQueue:
         max_bytes: bound on the bytes of unacknowledged records on disk (headers included).
         segment_bytes: a segment at least this big is closed and a new one started.
         fsync: fsync appended records in :meth:`sync` (and segments, marks and directories where needed).
+        retain_records: acknowledged records kept on disk at least (whole segments are deleted only when every
+            record in them is acknowledged and at least this many acknowledged records follow them).
 
     Raises:
         QueueLocked: another process has the queue open.
@@ -160,8 +165,12 @@ class DiskQueue:
         OSError: the directory cannot be created or read.
     """
 
-    def __init__(self, directory: str, max_records: int, max_bytes: int, segment_bytes: int, fsync: bool) -> None:
+    def __init__(self, directory: str, max_records: int, max_bytes: int, segment_bytes: int, fsync: bool,
+                 retain_records: int = 0) -> None:
+        if retain_records < 0:
+            raise ValueError(f'retain_records must be >= 0, got {retain_records}')
         self.directory = directory
+        self.retain_records = retain_records
         self.max_records = max_records
         self.max_bytes = max_bytes
         self.segment_bytes = segment_bytes
@@ -293,6 +302,12 @@ class DiskQueue:
     def unacked(self) -> int:
         """Records stored and not yet acknowledged."""
         return self.last_seq - self.acked
+
+    @property
+    def floor(self) -> int:
+        """The newest record no longer on disk (0: none deleted): records after it can be read, up to
+        ``last_seq``."""
+        return self._segments[0].first_seq - 1
 
     def has_room(self, size: int = 0) -> bool:
         """Whether one more record of ``size`` payload bytes fits the bounds."""
@@ -431,8 +446,9 @@ class DiskQueue:
         return newly
 
     def _compact(self) -> None:
-        """Delete the segments whose records are all acknowledged (never the newest)."""
-        done = [s for s in self._segments[:-1] if s.last_seq <= self.acked]
+        """Delete the segments whose records are all acknowledged and followed by at least ``retain_records``
+        acknowledged ones (never the newest)."""
+        done = [s for s in self._segments[:-1] if s.last_seq <= self.acked - self.retain_records]
         if not done:
             return
         # the mark must be durable first: it, or the first remaining segment, is where the acked records end

@@ -11,7 +11,13 @@ Epochs: a batch of an unknown epoch comes from a new sender queue (its directory
 receiver switches to it, retires the old epoch (batches of a retired epoch are dropped as stale, so a late
 batch of the old queue is never delivered again) and starts from the batch's ``acked_seq``: every record up
 to the sender's cumulative ack has been delivered by some receiver before. For the same reason a receiver
-whose state file is lost or older than the sender's ack moves its mark forward to that ack.
+whose state file is lost or older than the sender's ack moves its mark forward to that ack. (The sender's ack
+in a batch is its queue's ``floor``: the records it no longer holds. It keeps acknowledged records for a while,
+so a receiver whose mark is behind, e.g. a consumer promoted with an older copy of the mark, gets them again.)
+
+The mark can travel: :meth:`Receiver.mark` is a JSON-able copy (epoch, delivered, retired epochs) and
+:meth:`Receiver.adopt` takes one over (a store instance promoted with the state of the one before it holds the
+mark that matches that state; it acknowledges from there and the sender sends what follows again).
 """
 from __future__ import annotations
 
@@ -92,6 +98,18 @@ class Receiver:
         self.duplicates += start
         return Plan(start, ack=True)
 
+    def mark(self) -> dict:
+        """The delivered mark, JSON-able: ``{epoch, delivered, retired}``."""
+        return {'epoch': self.epoch, 'delivered': self.delivered, 'retired': list(self.retired)}
+
+    def adopt(self, mark: dict) -> None:
+        """Take over a mark (:meth:`mark` of another receiver of this stream, checked by :func:`parse_mark`)
+        and persist it."""
+        m = parse_mark(mark)
+        self.epoch, self.delivered, self.retired = m['epoch'], m['delivered'], m['retired']
+        self.last_seq = self.delivered
+        self._save()
+
     def commit(self, delivered_seq: int) -> None:
         """The records of the current epoch up to ``delivered_seq`` have been delivered: persist the mark."""
         if delivered_seq <= self.delivered:
@@ -110,3 +128,20 @@ class Receiver:
     def _save(self) -> None:
         write_json(self.state_path, {'epoch': self.epoch, 'delivered': self.delivered, 'retired': self.retired,
                                      'kind': list(self.kind)}, durable=self.fsync)
+
+
+def parse_mark(mark: object, field: str = 'relay') -> dict:
+    """A receiver's :meth:`Receiver.mark`, checked (ValueError naming ``field`` and the key)."""
+    if not isinstance(mark, dict):
+        raise ValueError(f'{field} must be an object, got {type(mark).__name__}')
+    out = {}
+    for key in ('epoch', 'delivered'):
+        v = mark.get(key)
+        if not isinstance(v, int) or isinstance(v, bool) or v < 0:
+            raise ValueError(f'{field}.{key} must be an integer >= 0, got {v!r}')
+        out[key] = v
+    retired = mark.get('retired')
+    if not isinstance(retired, list) or not all(isinstance(e, int) and not isinstance(e, bool) for e in retired):
+        raise ValueError(f'{field}.retired must be a list of integers, got {retired!r}')
+    out['retired'] = list(retired)[-RETIRED_KEPT:]
+    return out

@@ -7,10 +7,20 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
+from typing import Optional
 
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.mapio import OccupancyMap, load_map
 from cnr_params import Section
+from cnr_store_forward.core.config import Common, common_from_section
+
+
+@dataclass
+class RelayParams:
+    """The store-and-forward stream whose receiving end the node is (README "Input through the relay")."""
+    common: Common               # stream, topic_prefix: <topic_prefix>/<stream>/data and .../ack
+    ack_period: float            # s, the ack repeated this often while active
+    fsync: bool                  # fsync the delivered mark after each batch
 
 
 @dataclass
@@ -24,6 +34,7 @@ class ManagerParams:
     standby_buffer: int          # readings a migration standby keeps (README "Migration state")
     recover_service: str         # the merger's GetRecentMeasurements ('' = no recovery; README "Recovery")
     recover_timeout: float       # s
+    relay: Optional[RelayParams]     # None: merged_measurements subscribed directly
 
 
 def read_grid(p: Section, occupancy: OccupancyMap) -> MapcellGrid:
@@ -33,6 +44,18 @@ def read_grid(p: Section, occupancy: OccupancyMap) -> MapcellGrid:
     return grid
 
 
+def read_relay(p: Section) -> Optional[RelayParams]:
+    """``~relay_stream`` ('' = none) and the relay's settings in ``~relay`` (config/store_forward.yaml)."""
+    stream = p.string('relay_stream')
+    if not stream:
+        return None
+    r = p.section('relay')
+    common = common_from_section(Section({**r.data, 'stream': stream}, r.source, r.prefix))
+    receiver = r.section('receiver')
+    return RelayParams(common=common, ack_period=receiver.number('ack_period', positive=True),
+                       fsync=receiver.boolean('fsync'))
+
+
 def read_params(p: Section) -> ManagerParams:
     map_file = p.file_path('map_file')
     return ManagerParams(grid=read_grid(p, load_map(map_file)), store=os.path.expanduser(p.string('store')),
@@ -40,4 +63,4 @@ def read_params(p: Section) -> ManagerParams:
                          publish_period=1.0 / p.number('max_publish_rate', positive=True),
                          frame_id=p.string('frame_id'), standby_buffer=p.integer('standby_buffer', minimum=1),
                          recover_service=p.string('recover_service'),
-                         recover_timeout=p.number('recover_timeout', positive=True))
+                         recover_timeout=p.number('recover_timeout', positive=True), relay=read_relay(p))
