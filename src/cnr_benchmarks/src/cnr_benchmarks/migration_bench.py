@@ -1,7 +1,8 @@
 """Migration downtime on the testbed (needs root).
 
     launch_scripts/bench_migration.sh [--runs 10] [--rtts 0,50,100] [--modules a,b] [--modes cold,hot]
-                                      [--cutoff-trials 3] [--settle 3] [--out DIR] [--port 11411]
+                                      [--cutoff-trials 3] [--standbys cold,warm] [--settle 3] [--out DIR]
+                                      [--soak SECONDS] [--soak-link 100,0.05] [--port 11411]
                                       [--config-dir DIR]   (default config/; e.g. a copy with robot_cpu off)
                                       [--slowdown S]       (the robot capped at 1/S CPU, on a copy in the scratch)
 
@@ -13,17 +14,23 @@ corridor scenario with a long timeout so the robot keeps patrolling), a migratio
 consumer's view: every output and its instance, 20 global-goal requests a second, move_base's results), and,
 for each RTT (set as two one-way halves) x module x mode, ``--runs`` round trips robot -> cloud -> robot through
 ``migrate``. Hot migrations first start a standby on the target and wait until it is warm. Then, per module,
-``--cutoff-trials`` times: the module on the cloud, the link cut, the time until the robot's instance is
-promoted and its output is back. At the end: measurements lost (merger's output vs the store) and goals
-aborted (move_base results). Writes docs/results/migration_hot/, migration_cold/ (by --modes; both:
-migration/) or DIR: results.tsv, failover.tsv and the page README.md; the rows as measured, the mission's report
-and logs and the probe's rows go to bench_results/<that experiment>/.
+``--cutoff-trials`` times for each of ``--standbys``: the module on the cloud, the link cut, the time until the
+robot's instance is active (its status's stamp), promoted (the manager's placement) and its output is back; the
+robot's instance is a warm standby started before the cut, or (cold) none. ``--soak S``: then every module on
+the cloud, the link at ``--soak-link`` (RTT ms, loss fraction, both directions) for S seconds: how often a
+module failed over (its term moved) and how often the cloud instance's lease lapsed (the probe's ``lapsed``
+rows; the instances' logs). At the end: measurements lost (merger's output vs the store) and goals aborted
+(move_base results). Writes docs/results/migration_hot/, migration_cold/ (by --modes; both: migration/) or
+DIR: results.tsv, failover.tsv, soak.tsv and the page README.md; the rows as measured, the mission's report and
+logs and the probe's rows go to bench_results/<that experiment>/. ``--runs 0 --cutoff-trials N --standbys warm
+--soak 600`` measures failover and its absence on a lossy link only.
 """
 from __future__ import annotations
 
 import argparse
 import datetime
 import json
+import math
 import os
 import re
 import subprocess
@@ -45,7 +52,10 @@ FLOWING_WITHIN = {'move_base': 0.3, 'local_mapcell_manager': 1.5, 'mfg': 2.5, 'g
 
 COLUMNS = ['rtt_ms', 'module', 'mode', 'direction', 'run', 'outcome', 'manager_downtime', 'consumer_gap', 'downtime',
            'stray', 'duration', 'term']
-FAILOVER_COLUMNS = ['rtt_ms', 'module', 'standby', 'trial', 'promoted_after', 'output_after', 'outcome']
+FAILOVER_COLUMNS = ['rtt_ms', 'module', 'standby', 'trial', 'active_after', 'promoted_after', 'output_after',
+                    'outcome']
+SOAK_COLUMNS = ['module', 'seconds', 'rtt_ms', 'loss', 'term_before', 'term_after', 'host_after', 'failovers',
+                'lapses', 'lapses_logged']
 RESULT = re.compile(r'migration (\d+): (\S+) -> (\S+): (\S+) \(term (\d+), ([\d.]+) s(?:; hand-over (\d+) ms)?\)')
 
 
@@ -80,6 +90,12 @@ class Bench:
     def placement(self) -> Dict[str, str]:
         out = self.ns('robot', 'rosrun', 'migration_manager', 'migrate', '--placement', '--timeout', '5', timeout=60)
         return parse_placement(out.stdout)
+
+    def terms(self) -> Dict[str, int]:
+        """Each module's term (``migrate --placement``: module host term N ...)."""
+        out = self.ns('robot', 'rosrun', 'migration_manager', 'migrate', '--placement', '--timeout', '5', timeout=60)
+        return {r[0]: int(r[3]) for r in (line.split() for line in out.stdout.splitlines())
+                if len(r) >= 4 and r[2] == 'term' and r[3].isdigit()}
 
     def role(self, module: str, side: str) -> str:
         out = self.ns(side, 'rostopic', 'echo', '-n', '1', f'/migration/{module}/{side}/status', timeout=15)
@@ -133,8 +149,10 @@ class Bench:
         report.progress('all modules active on the robot; probe running')
 
     def migrate(self, module: str, target: str, mode: str) -> Dict:
+        """Order a migration; mode '' = the module's default (hot if it keeps a hot standby)."""
         t0 = time.time()
-        res = self.ns('robot', 'rosrun', 'migration_manager', 'migrate', module, target, '--mode', mode, timeout=180)
+        res = self.ns('robot', 'rosrun', 'migration_manager', 'migrate', module, target,
+                      *(['--mode', mode] if mode else []), timeout=180)
         t1 = time.time()
         m = RESULT.search(res.stdout)
         out = dict(t0=t0, t1=t1, outcome='error', manager_downtime='', term='', duration=t1 - t0,
@@ -197,7 +215,7 @@ class Bench:
         """The module active on the cloud, the link cut: the robot takes it over with the newest replicated state,
         from a cold start (no standby on the robot) and from a warm standby started there before the cut."""
         for module in self.args.modules:
-            for standby in ('cold', 'warm'):
+            for standby in self.args.standbys:
                 for trial in range(1, self.args.cutoff_trials + 1):
                     self.cutoff(failover, rtt, module, standby, trial)
 
@@ -205,12 +223,15 @@ class Bench:
         key = dict(rtt_ms=rtt, module=module, standby=standby, trial=trial)
         if self.placement().get(module) != 'cloud':
             self.wait_flowing(module)
-            if self.migrate(module, 'cloud', 'cold')['outcome'] != 'done':
-                failover.row(**key, promoted_after='', output_after='', outcome='not_on_cloud')
+            if self.migrate(module, 'cloud', '')['outcome'] != 'done':
+                failover.row(**key, active_after='', promoted_after='', output_after='', outcome='not_on_cloud')
                 return
         if standby == 'warm' and not self.warm_standby(module, 'robot'):
-            failover.row(**key, promoted_after='', output_after='', outcome='no_standby')
+            failover.row(**key, active_after='', promoted_after='', output_after='', outcome='no_standby')
             return
+        if standby == 'cold' and self.role(module, 'robot') == 'standby':      # a hot standby kept there
+            self.ns('robot', 'rosservice', 'call', '/migration/agents/robot/command', 'stop', module, timeout=30)
+            self.wait(f'no {module} standby on the robot', lambda: self.role(module, 'robot') != 'standby', 60)
         time.sleep(self.args.settle)
         self.wait_flowing(module)
         self.tb.set('both', outage=True)
@@ -222,14 +243,49 @@ class Bench:
         topic = OUTPUT_TOPIC[module]
         first = next((r.time for r in rows if r.topic == topic and r.time > t_cut and r.ok and
                       (topic == 'next_goal' or r.instance == f'{module}@robot')), None)
+        active = next((r.time for r in rows if r.topic == 'active' and r.time > t_cut
+                       and r.instance == f'{module}@robot'), None)
         self.set_rtt(rtt)
-        failover.row(**key, promoted_after=promoted, output_after='' if first is None else first - t_cut,
-                     outcome='promoted' if ok else 'timeout')
-        report.progress(f'RTT {rtt:g} ms cut-off {module} ({standby} standby on the robot) #{trial}: promoted after '
+        failover.row(**key, active_after='' if active is None else active - t_cut, promoted_after=promoted,
+                     output_after='' if first is None else first - t_cut, outcome='promoted' if ok else 'timeout')
+        report.progress(f'RTT {rtt:g} ms cut-off {module} ({standby} standby on the robot) #{trial}: active after '
+                        f'{"–" if active is None else f"{active - t_cut:.2f} s"}, promoted (placement) after '
                         f'{"–" if promoted == "" else f"{promoted:.2f} s"}, output back after '
                         f'{"–" if first is None else f"{first - t_cut:.2f} s"}')
         self.wait(f'the cloud instance of {module} to step down', lambda: self.role(module, 'cloud') != 'active', 60)
         time.sleep(self.args.settle)
+
+    def soak(self, out: report.TsvLog) -> None:
+        """Every module of --modules active on the cloud, the link at --soak-link for --soak seconds: failovers (a
+        module's term moved or it left the cloud) and lapses of the cloud instances' leases (the probe's
+        ``lapsed`` rows, stamped by the instance; and ``lease lapsed`` lines in the instances' logs)."""
+        rtt, loss = self.args.soak_link
+        modules = self.args.modules
+        for module in modules:
+            if self.placement().get(module) != 'cloud' and self.migrate(module, 'cloud', '')['outcome'] != 'done':
+                report.progress(f'  (soak: {module} could not be moved to the cloud)')
+        time.sleep(self.args.settle)
+        before = self.terms()
+        self.tb.set('both', delay=rtt / 2.0, loss=loss, outage=False)
+        t0 = time.time()
+        report.progress(f'soak: {", ".join(modules)} on the cloud, RTT {rtt:g} ms, loss {100 * loss:g} % for '
+                        f'{self.args.soak:g} s (terms {before})')
+        self.wait('the soak to end', lambda: time.time() - t0 >= self.args.soak, self.args.soak + 5)
+        t1 = time.time()
+        self.tb.set('both', delay=0.0, loss=0.0, outage=False)
+        after, hosts = self.terms(), self.placement()
+        rows = read_probe(self.probe_file)
+        logged = lapses_logged(os.path.join(self.out, 'mission', 'logs', 'instances'), t0, t1)
+        for module in modules:
+            lapses = sum(1 for r in rows if r.topic == 'lapsed' and r.instance == f'{module}@cloud'
+                         and t0 <= r.time <= t1)
+            moved = after.get(module, -1) != before.get(module, -2) or hosts.get(module) != 'cloud'
+            out.row(module=module, seconds=round(t1 - t0, 1), rtt_ms=rtt, loss=loss, term_before=before.get(module, ''),
+                    term_after=after.get(module, ''), host_after=hosts.get(module, ''),
+                    failovers=(after.get(module, 0) - before.get(module, 0) + 1) // 2 if moved else 0, lapses=lapses,
+                    lapses_logged=logged.get(f'{module}@cloud', 0))
+            report.progress(f'soak {module}: terms {before.get(module)} -> {after.get(module)}, on '
+                            f'{hosts.get(module)}, {lapses} lapses ({logged.get(f"{module}@cloud", 0)} logged)')
 
     def stop(self) -> Dict:
         """Ends the mission through the monitor's ~finish (it writes its report, with the store check), then stops
@@ -248,8 +304,25 @@ class Bench:
         return json.load(open(path)) if os.path.exists(path) else {}
 
 
+LAPSE_LINE = re.compile(r'\[(?:WARN|WARNING)\] \[(\d+\.\d+)[^\]]*\]: (\S+@\S+): lease lapsed')
+
+
+def lapses_logged(log_dir: str, t0: float, t1: float) -> Dict[str, int]:
+    """instance -> ``lease lapsed`` lines in the instances' logs (``log_dir``) stamped between t0 and t1."""
+    counts: Dict[str, int] = {}
+    if not os.path.isdir(log_dir):
+        return counts
+    for name in os.listdir(log_dir):
+        with open(os.path.join(log_dir, name), errors='replace') as f:
+            for line in f:
+                m = LAPSE_LINE.search(line)
+                if m and t0 <= float(m.group(1)) <= t1:
+                    counts[m.group(2)] = counts.get(m.group(2), 0) + 1
+    return counts
+
+
 def write_markdown(out: str, args: argparse.Namespace, results: List[Dict], failovers: List[Dict],
-                   summary: Dict, aborted: int, started: str, probe_file: str) -> str:
+                   summary: Dict, aborted: int, started: str, probe_file: str, soaks: List[Dict]) -> str:
     """The page README.md with results.tsv and failover.tsv in ``out``; returns the page."""
     from cnr_benchmarks.core.stats import percentile
     header = list(Group.HEADER)
@@ -271,13 +344,24 @@ def write_markdown(out: str, args: argparse.Namespace, results: List[Dict], fail
                                    [g.row() for g in group_results(results, ('rtt_ms', 'module', 'mode',
                                                                               'direction'))])]
     if failovers:
-        lines += ['', 'Cut-off while active on the cloud: seconds from the cut until the robot instance is promoted / '
-                  'its output is back (median over trials); standby = what ran on the robot before the cut (cold: '
-                  'nothing, the instance is started then).', '',
-                  report.markdown_table(['RTT ms', 'module', 'standby', 'trials', 'promoted p50', 'output p50'], [
-                      [*k, len(v), percentile([float(x['promoted_after']) for x in v if x['promoted_after']], 50),
-                       percentile([float(x['output_after']) for x in v if x['output_after']], 50)]
+        def column(v: List[Dict], key: str) -> List[float]:
+            return [float(x[key]) for x in v if x.get(key)]
+        lines += ['', 'Cut-off while active on the cloud: seconds from the cut until the robot instance is active '
+                  '(its status\'s stamp) / promoted (the manager\'s placement, polled) / its output is back; standby '
+                  '= what ran on the robot before the cut (cold: nothing, the instance is started then).', '',
+                  report.markdown_table(['RTT ms', 'module', 'standby', 'trials', 'active p50', 'active max',
+                                         'promoted p50', 'output p50', 'output max'], [
+                      [*k, len(v), percentile(column(v, 'active_after'), 50), max(column(v, 'active_after') or [math.nan]),
+                       percentile(column(v, 'promoted_after'), 50), percentile(column(v, 'output_after'), 50),
+                       max(column(v, 'output_after') or [math.nan])]
                       for k, v in sorted(report.group(failovers, 'rtt_ms', 'module', 'standby').items())])]
+    if soaks:
+        lines += ['', 'Soak: the modules active on the cloud, the link lossy for the time given; failovers (the '
+                  'module\'s term moved) and lapses of the cloud instance\'s lease (seen by the probe / logged by '
+                  'the instance).', '',
+                  report.markdown_table(['module', 's', 'RTT ms', 'loss', 'failovers', 'lapses', 'lapses logged'],
+                                        [[x['module'], x['seconds'], x['rtt_ms'], x['loss'], x['failovers'],
+                                          x['lapses'], x['lapses_logged']] for x in soaks])]
     check = summary.get('store_check') or {}
     lost = '–' if not check else (f'{check["missing_count"]} of {check["published_since_first"]} '
                                   f'({check["duplicates"]} stored twice)')
@@ -289,7 +373,8 @@ def write_markdown(out: str, args: argparse.Namespace, results: List[Dict], fail
         tuple(sorted(set(args.modes))), ('Migration downtime and failover', 'thesis §4.2.5'))
     return results_page.write_page(out, title, reference, '\n'.join(lines), args.command,
                                    tables={'results.tsv': (COLUMNS, results),
-                                           'failover.tsv': (FAILOVER_COLUMNS, failovers)})
+                                           'failover.tsv': (FAILOVER_COLUMNS, failovers),
+                                           **({'soak.tsv': (SOAK_COLUMNS, soaks)} if soaks else {})})
 
 
 def experiment(modes: List[str]) -> str:
@@ -304,6 +389,11 @@ def main(argv: Optional[List[str]] = None) -> int:
     ap.add_argument('--modules', default='move_base,local_mapcell_manager,global_goal_manager,mfg')
     ap.add_argument('--modes', default='cold,hot')
     ap.add_argument('--cutoff-trials', type=int, default=3)
+    ap.add_argument('--standbys', default='cold,warm', help='what runs on the robot before a cut: cold (nothing), '
+                                                          'warm (a standby)')
+    ap.add_argument('--soak', type=float, default=0.0, help='s with every module on the cloud over a lossy link '
+                                                          '(--soak-link; 0 = none)')
+    ap.add_argument('--soak-link', default='100,0.05', help='RTT ms, loss fraction of the soak (both directions)')
     ap.add_argument('--settle', type=float, default=3.0, help='s after each migration before the next')
     ap.add_argument('--out', default=None, help="the page's folder (default docs/results/migration_<mode>, or "
                                                 "migration for both modes)")
@@ -317,9 +407,18 @@ def main(argv: Optional[List[str]] = None) -> int:
     args.command = cli.command(ap, argv)
     args.modules = [m for m in args.modules.split(',') if m]
     args.modes = [m for m in args.modes.split(',') if m]
-    bad = [m for m in args.modes if m not in ('cold', 'hot')] + [m for m in args.modules if m not in OUTPUT_TOPIC]
+    args.standbys = [m for m in args.standbys.split(',') if m]
+    bad = [m for m in args.modes if m not in ('cold', 'hot')] + [m for m in args.modules if m not in OUTPUT_TOPIC] \
+        + [m for m in args.standbys if m not in ('cold', 'warm')]
     if bad or not args.modes:
-        ap.error(f'unknown mode or module: {", ".join(bad)}')
+        ap.error(f'unknown mode, module or standby: {", ".join(bad)}')
+    try:
+        rtt_ms, loss = (float(x) for x in args.soak_link.split(','))
+    except ValueError:
+        ap.error(f'--soak-link must be "RTT_MS,LOSS", got {args.soak_link!r}')
+    if rtt_ms < 0 or not 0.0 <= loss < 1.0 or args.soak < 0:
+        ap.error(f'--soak-link needs RTT >= 0 and 0 <= loss < 1, --soak >= 0; got {args.soak_link}, {args.soak:g}')
+    args.soak_link = (rtt_ms, loss)
     rtts = report.parse_rtts(ap.prog, args.rtts)
     args.scratch = results_page.scratch_dir(experiment(args.modes))
     args.out = os.path.abspath(args.out or results_page.results_dir(experiment(args.modes)))
@@ -338,6 +437,7 @@ def main(argv: Optional[List[str]] = None) -> int:
     bench = Bench(args)
     results = report.TsvLog(os.path.join(bench.out, 'results.tsv'), COLUMNS)
     failover = report.TsvLog(os.path.join(bench.out, 'failover.tsv'), FAILOVER_COLUMNS)
+    soak = report.TsvLog(os.path.join(bench.out, 'soak.tsv'), SOAK_COLUMNS)
     summary: Dict = {}
     status = 0
     try:
@@ -349,6 +449,8 @@ def main(argv: Optional[List[str]] = None) -> int:
             bench.round_trips(results, rtt)
             if args.cutoff_trials > 0:
                 bench.cutoffs(failover, rtt)
+        if args.soak > 0:
+            bench.soak(soak)
     except KeyboardInterrupt:
         report.progress('interrupted: writing what was measured')
     except MissionEnded as exc:
@@ -358,13 +460,15 @@ def main(argv: Optional[List[str]] = None) -> int:
         summary = bench.stop()
         results.close()
         failover.close()
+        soak.close()
     import csv
     res = list(csv.DictReader(open(results.path), delimiter='\t'))
     fo = list(csv.DictReader(open(failover.path), delimiter='\t'))
+    soaks = list(csv.DictReader(open(soak.path), delimiter='\t'))
     aborted = 0
     if os.path.exists(bench.probe_file):
         aborted = sum(1 for r in read_probe(bench.probe_file) if r.topic == '/move_base/result' and r.instance == '4')
-    report.progress(write_markdown(args.out, args, res, fo, summary, aborted, started, bench.probe_file))
+    report.progress(write_markdown(args.out, args, res, fo, summary, aborted, started, bench.probe_file, soaks))
     return status
 
 

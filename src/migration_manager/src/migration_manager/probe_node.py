@@ -7,7 +7,9 @@ request, waits for the name to move to another provider (:class:`migration_manag
 the global goal manager has no periodic output of its own), recording each answer at the time its request went
 out (a request sent then was served), and move_base's goal results (``/move_base/result``: ok = succeeded, the
 final status code in the instance column). For the modules in ``~status_modules`` it also records when each instance closed its outputs for good (topic ``frozen``: the
-frozen status's stamp, the instance's own clock — on the testbed one clock for every host). Writes a TSV
+frozen status's stamp, the instance's own clock — on the testbed one clock for every host), when one became
+active (topic ``active``: a promotion, or a renewal granted again after a lapse) and when an active one's lease
+lapsed (topic ``lapsed``), both stamped by the instance. Writes a TSV
 (``time``, ``topic``, ``instance``, ``ok``, ``stamp``: the message's header stamp for a type with a header, so an
 output can be matched with the input it carries) as it goes, flushed per line, so a reader sees the gaps: the
 consumer's gap (last output of the old instance to the first of the new one) and the downtime (the old
@@ -48,6 +50,7 @@ class Probe:
         if not isinstance(hosts, list) or not all(isinstance(h, str) and h for h in hosts):
             raise p.error('hosts', f'must be a list of host names, got {hosts!r}')
         self.frozen_seen = set()
+        self.roles: Dict[tuple, int] = {}          # (instance, pid, term) -> its newest role
         self.lock = threading.Lock()
         self.out = open(p.string('out'), 'a', buffering=1)
         if self.out.tell() == 0:
@@ -85,6 +88,14 @@ class Probe:
         if msg.role == InstanceStatus.FROZEN and key not in self.frozen_seen:
             self.frozen_seen.add(key)
             self._write('frozen', msg.instance, True, msg.header.stamp.to_sec())
+        # active: the outputs opened (a promotion, or a renewal granted again after a lapse); lapsed: an active
+        # instance's lease ran out (its outputs closed until a renewal is granted). Stamped by the instance.
+        before = self.roles.get(key)
+        self.roles[key] = msg.role
+        if msg.role == InstanceStatus.ACTIVE and before != InstanceStatus.ACTIVE:
+            self._write('active', msg.instance, True, msg.header.stamp.to_sec())
+        elif msg.role == InstanceStatus.PROMOTED and before == InstanceStatus.ACTIVE:
+            self._write('lapsed', msg.instance, False, msg.header.stamp.to_sec())
 
     def _on_msg(self, msg: rospy.AnyMsg, topic: str) -> None:
         self._write(topic, msg._connection_header.get(INSTANCE_HEADER, '-'), True, stamp=self._stamp(msg))
