@@ -210,3 +210,86 @@ def test_filter_memo_answers_like_the_globs_and_forgets_beyond_its_limit():
     names = ['/move_base/goal', '/tf', '/tf_static', '/move_base/set_logger_level', '/odom'] * 2
     assert [f.passes(n) for n in names] == [True, True, False, False, False] * 2
     assert len(f._memo) <= 3
+
+
+def test_a_proxy_the_master_holds_at_the_remote_nodes_uri_is_no_local_node():
+    """A registration of ``/cloud/talker`` at the remote node's own URI (either spelling) that the bridge no longer
+    counts as its own (a plan on a snapshot older than its last changes) is its proxy, imported again: only a node
+    elsewhere is a local node of that name."""
+    for held in ('http://10.77.0.2:4001/', 'http://10.77.0.2:4001'):
+        local = snapshot(pubs={'/chatter': ['/cloud/talker']}, types={'/chatter': 'std_msgs/String'},
+                         nodes={'/cloud/talker': held})
+        result = sync.plan('cloud', remote_state(), local, set(), ALL, ALL, {}, {})
+        assert any(r.caller_id == '/cloud/talker' for r in result.registrations), held
+        assert result.problems == []
+    assert sync.same_node('http://h:1/', 'http://h:1') and not sync.same_node('http://h:1/', 'http://h:2/')
+    assert sync.is_proxy('/cloud/talker', ['cloud']) and not sync.is_proxy('/cloudy', ['cloud'])
+
+
+def test_a_hidden_local_provider_keeps_its_age_until_it_serves_again():
+    """The robot's provider (first seen at 0) is hidden by the cloud's newer one (10) from 12 on; the cloud is lost at
+    30 and the robot's serves again: it is 30 s old, not new, so the cloud's (20 s old) wins again when it returns."""
+    robot, cloud = ('/flap_robot', 'rosrpc://r:1'), ('/cloud/flap_cloud', 'rosrpc://c:1')
+    seen, ages = sync.service_ages({}, {'/s': robot}, {}, 0.0)
+    assert ages == {'/s': 0.0}
+    seen, ages = sync.service_ages(seen, {'/s': cloud}, {'/s': robot}, 12.0)
+    seen, ages = sync.service_ages(seen, {'/s': cloud}, {'/s': robot}, 20.0)
+    seen, ages = sync.service_ages(seen, {'/s': robot}, {}, 30.0)
+    assert ages == {'/s': 30.0}
+    state = remote_state(srvs={'/s': ['/flap_cloud', 'rosrpc://c:1', 20.0]},
+                         nodes=dict(remote_state()['nodes'], **{'/flap_cloud': 'http://10.77.0.2:4003/'}))
+    local = snapshot(services={'/s': '/flap_robot'}, service_apis={'/s': 'rosrpc://r:1'})
+    result = sync.plan('cloud', state, local, set(), ALL, ALL, ages, {})
+    assert any(r.kind == 'srv' and r.caller_id == '/cloud/flap_cloud' for r in result.registrations)
+    # a provider gone from the master and not hidden is forgotten: if it comes back, it is new
+    seen, ages = sync.service_ages(seen, {}, {}, 31.0)
+    assert seen == {}
+
+
+def clock_state() -> dict:
+    """A robot whose simulator publishes /clock and /odom and whose driver publishes /temperature."""
+    return {'pubs': {'/clock': ['/sim'], '/odom': ['/sim'], '/temperature': ['/driver']}, 'subs': {}, 'srvs': {},
+            'types': {'/clock': 'rosgraph_msgs/Clock', '/odom': 'nav_msgs/Odometry',
+                      '/temperature': 'sensor_msgs/Temperature'}, 'md5': {},
+            'nodes': {'/sim': 'http://10.77.0.1:4001/', '/driver': 'http://10.77.0.1:4002/'}}
+
+
+def test_a_publisher_of_an_in_order_topic_keeps_its_uri_spelling_in_every_generation():
+    """A forced reconnect (another spelling) gives a subscriber a second connection while the first still holds
+    the outage's backlog: /clock would step back when TCP delivers it. The simulator keeps its spelling for all its
+    topics (a node has one URI in a master); the driver is reconnected as before."""
+    apis = []
+    for generation in range(4):
+        result = sync.plan('robot', clock_state(), sync.Snapshot(), set(), ALL, ALL, {}, {}, generation,
+                           sync.Filter(['/clock']))
+        apis.append({r.caller_id: r.caller_api for r in result.registrations})
+    assert [a['/robot/sim'] for a in apis] == ['http://10.77.0.1:4001/'] * 4
+    assert [a['/robot/driver'] for a in apis] == ['http://10.77.0.1:4002/', 'http://10.77.0.1:4002'] * 2
+    assert sync.in_order_publishers(clock_state(), sync.Filter(['/clock'])) == {'/sim'}
+    # without in-order topics every node alternates, the simulator too
+    plain = sync.plan('robot', clock_state(), sync.Snapshot(), set(), ALL, ALL, {}, {}, 1, sync.Filter())
+    assert {r.caller_api for r in plain.registrations if r.caller_id == '/robot/sim'} == {'http://10.77.0.1:4001'}
+
+
+def test_a_peer_that_lost_us_alone_has_its_nodes_reconnected_here_once():
+    """An outage in one direction: only the peer lost us, but our connections to its nodes stalled as well."""
+    from multimaster_bridge.core.sync import rejoined_without_our_loss as rejoined
+    assert rejoined(False, True, since_our_return=30.0, loss_timeout=1.5)          # it lost us, we heard it
+    assert not rejoined(True, True, 30.0, 1.5) and not rejoined(False, False, 30.0, 1.5)
+    assert not rejoined(None, True, 30.0, 1.5)                                      # its first heartbeat
+    # both lost each other: our own loss already gave a new generation; a second one would undo it
+    assert not rejoined(False, True, since_our_return=0.2, loss_timeout=1.5)
+
+
+def test_in_order_topics_is_a_required_list_of_globs():
+    from cnr_params import load_yaml
+    here = os.path.dirname(os.path.abspath(__file__))
+    base = load_yaml(os.path.join(here, '..', 'config', 'bridge.yaml'))
+    base.update(name='robot', listen='10.77.0.1:11511', peers=[dict(name='cloud', address='10.77.0.2:11511')],
+                secret='0123456789')
+    assert config.parse(Section(base, '/bridge')).in_order.passes('/clock')
+    for value, message in ((None, 'in_order_topics: missing'), ([3], 'in_order_topics')):
+        data = dict(base, in_order_topics=value) if value is not None else \
+            {k: v for k, v in base.items() if k != 'in_order_topics'}
+        with pytest.raises(ConfigError, match=message):
+            config.parse(Section(data, '/bridge'))

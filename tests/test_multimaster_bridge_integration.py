@@ -12,6 +12,7 @@ import time
 
 import pytest
 
+from bridge_testbed import log
 from cnr_harness import wait_until
 
 pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason='needs root (network namespaces and TUN devices)')
@@ -21,24 +22,9 @@ NAME = f'mmb{os.getpid() % 10000}'
 
 @pytest.fixture(scope='module')
 def hosts(tmp_path_factory, workspace):
-    from cnr_testbed.api import Testbed
-    from cnr_testbed.rosside import RosSide
-    tb = Testbed(os.path.join(workspace, 'config', 'testbed.yaml'),
-                 {'name': NAME, 'robot.namespace': f'{NAME}-robot', 'cloud.namespace': f'{NAME}-cloud'})
-    tb.up()
-    logs = tmp_path_factory.mktemp('mmb')
-    robot = RosSide(tb, 'robot', log_dir=str(logs))
-    cloud = RosSide(tb, 'cloud', log_dir=str(logs))
-    try:
-        robot.start_master()
-        cloud.start_master()
-        secret = logs / 'secret'
-        secret.write_text('integration-secret\n')
-        yield tb, robot, cloud, str(secret)
-    finally:
-        cloud.stop()
-        robot.stop()
-        tb.down()
+    from bridge_testbed import two_hosts
+    with two_hosts(workspace, NAME, str(tmp_path_factory.mktemp('mmb'))) as h:
+        yield h.tb, h.robot, h.cloud, h.secret
 
 
 SETTINGS = dict(allow_topics=['/chatter', '/rtt/*'], allow_services=['/rtt/*'])
@@ -46,12 +32,10 @@ SETTINGS = dict(allow_topics=['/chatter', '/rtt/*'], allow_services=['/rtt/*'])
 
 @pytest.fixture
 def bridged(hosts):
-    from cnr_testbed.rosside import start_bridge
+    from bridge_testbed import Hosts
     tb, robot, cloud, secret = hosts
     tb.set('both', delay=0.0, loss=0.0, outage=False)
-    procs = [start_bridge(robot, cloud, secret, **SETTINGS), start_bridge(cloud, robot, secret, **SETTINGS)]
-    wait_until(lambda: 'peer cloud is up' in log(procs[0]) and 'peer robot is up' in log(procs[1]), 30,
-             'the bridges to see each other')
+    procs = Hosts(tb, robot, cloud, secret).start_bridges(**SETTINGS)
     yield tb, robot, cloud, procs
     for side, proc in ((robot, procs[0]), (cloud, procs[1])):
         side.stop_proc(proc)
@@ -61,11 +45,6 @@ def bridged(hosts):
         for proc in list(side.procs):
             if proc is not side.master:
                 side.stop_proc(proc)
-
-
-def log(proc):
-    with open(proc.log_path, errors='replace') as f:
-        return f.read()
 
 
 def publishers(side, topic):

@@ -212,7 +212,10 @@ class Bridge:
         self.snapshot: Optional[sync.Snapshot] = None
         self.export: dict = {}
         self.export_digest = ''
-        self.service_first_seen: Dict[Tuple[str, str, str], float] = {}
+        self.service_first_seen: Dict[sync.ServiceKey, float] = {}
+        # the bridge changed its master since the last poll: plans wait for a poll that shows the change (a plan
+        # on an older snapshot takes a proxy just removed for a local node, or a proxy for a hidden local provider)
+        self.snapshot_stale = False
         self.shadowed: Dict[str, Tuple[str, str, str]] = {}   # service -> local (node, service_api, node_api)
         self.md5s: Dict[str, str] = {}
         self.local_ages: Dict[str, float] = {}
@@ -350,14 +353,11 @@ class Bridge:
         if refresh:
             self.last_node_refresh = now
         self.snapshot = snap
+        self.snapshot_stale = False
         owned = self.owned()
-        ages = {}
-        seen = {}
-        for s, node in snap.services.items():
-            key = (s, node, snap.service_apis.get(s, ''))
-            seen[key] = self.service_first_seen.get(key, now)
-            ages[s] = now - seen[key]
-        self.service_first_seen = seen
+        self.service_first_seen, ages = sync.service_ages(
+            self.service_first_seen, {s: (node, snap.service_apis.get(s, '')) for s, node in snap.services.items()},
+            {s: (node, api) for s, (node, api, _) in self.shadowed.items()}, now)
         if snap is previous and owned == self.exported_owned:
             # the master's graph as last time: the exported state too, but for the services' ages
             with self.lock:
@@ -394,7 +394,7 @@ class Bridge:
                               f'registrations')
 
     def reconcile(self) -> None:
-        if not self.closing:
+        if not self.closing and not self.snapshot_stale:
             self._reconcile()
 
     def _reconcile(self) -> None:
@@ -403,6 +403,8 @@ class Bridge:
             return
         owned = self.owned()
         for peer in self.peers.values():
+            if self.snapshot_stale:
+                break   # another peer's changes first show in the next poll
             with self.lock:
                 state = peer.state if peer.alive else None
                 generation = peer.generation
@@ -435,12 +437,16 @@ class Bridge:
             for r in register:
                 if r.kind == 'srv':
                     provider = snap.services.get(r.name)
-                    if provider is not None and provider not in owned and provider in snap.nodes:
+                    if provider is not None and provider not in owned and provider in snap.nodes \
+                            and not sync.is_proxy(provider, self.peers):
                         self.shadowed[r.name] = (provider, snap.service_apis.get(r.name, ''),
                                                  snap.nodes[provider])
             if not unregister and not register:
                 continue
             started = time.monotonic()
+            self.snapshot_stale = True
+            self.poll_requested = True
+            self.wake.set()
             failures = self.master.apply(unregister, register)
             for f in failures:
                 self._report(f'master refused {f}')

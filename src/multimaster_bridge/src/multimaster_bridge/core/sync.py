@@ -120,6 +120,39 @@ def uri_spelling(uri: str, generation: int) -> str:
     return base + '/' if with_slash else base
 
 
+def same_node(uri_a: str, uri_b: str) -> bool:
+    """Whether two XML-RPC URIs are spellings of one node's (with or without the trailing slash)."""
+    return uri_a.rstrip('/') == uri_b.rstrip('/')
+
+
+def is_proxy(node: str, peers: Iterable[str]) -> bool:
+    """Whether ``node`` has the name of a proxy of one of ``peers``' nodes (``/<peer>/...``)."""
+    return any(node.startswith(proxy_name(p, '')) for p in peers)
+
+
+ServiceKey = Tuple[str, str, str]   # (service, provider node, service URI)
+
+
+def service_ages(first_seen: Dict[ServiceKey, float], listed: Dict[str, Tuple[str, str]],
+                 hidden: Dict[str, Tuple[str, str]], now: float) -> Tuple[Dict[ServiceKey, float], Dict[str, float]]:
+    """How long each service's provider has been registered, for newest-provider-wins.
+
+    Args:
+        first_seen: (service, node, service URI) -> when that provider was first seen (the previous result).
+        listed: service -> (node, service URI) of its provider in the master now (a proxy, possibly).
+        hidden: service -> (node, service URI) of a local provider that a proxy hides in the master.
+        now: the time of the poll.
+
+    Returns:
+        (first_seen to pass next time, service -> age of its listed provider [s]). A local provider keeps its first
+        sighting while a proxy hides it: when the proxy goes (the peer was lost) and the provider serves again, it
+        is as old as it was, and a newer remote provider still wins when the peer returns.
+    """
+    keys = {(s,) + p for s, p in listed.items()} | {(s,) + p for s, p in hidden.items()}
+    kept = {k: first_seen.get(k, now) for k in keys}
+    return kept, {s: now - kept[(s,) + p] for s, p in listed.items()}
+
+
 def rejoined_without_our_loss(view_before: Optional[bool], view_now: bool, since_our_return: float,
                               loss_timeout: float) -> bool:
     """Whether a peer's heartbeat says it lost us and hears us again while we did not lose it: an outage in one
@@ -201,7 +234,7 @@ def plan(peer: str, state: dict, local: Snapshot, owned: Set[str], topics: Filte
         if not uri:
             return None
         cid = proxy_name(peer, node)
-        if cid in local.nodes and cid not in owned:
+        if cid in local.nodes and cid not in owned and not same_node(local.nodes[cid], uri):
             problems.append(f'{peer}: node {node} not imported: local node {cid} has that name')
             return None
         return cid, uri_spelling(uri, 0 if node in steady else generation)

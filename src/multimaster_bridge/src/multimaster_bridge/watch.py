@@ -1,0 +1,239 @@
+"""Watch two bridged masters and time how long the registrations across take to come back after each outage.
+
+:class:`RestoreWatch` polls both masters' ``getSystemState`` (and ``lookupNode`` for the proxies and the nodes they
+stand for) in a thread and checks the invariant of :mod:`multimaster_bridge.core.invariant` at every poll; the caller
+says when each outage began and ended, and :meth:`RestoreWatch.results` gives, per outage, the time from the link's
+return to the moment from which the invariant held until the next outage::
+
+    watch = RestoreWatch(robot_uri, cloud_uri, ['config/bridge.yaml', 'config/bridge_robot.yaml'],
+                         ['config/bridge.yaml', 'config/bridge_cloud.yaml'],
+                         robot_netns='robot', cloud_netns='cloud').start()
+    watch.outage_began(); ...; watch.outage_ended()      # times: time.monotonic() unless given
+    ...
+    summary = watch.stop().results()                     # RestoreResults: .restores, .median, .max, .unrestored
+
+A master inside a network namespace (the testbed's) is reached from inside it (``*_netns``: the name under
+/var/run/netns; root). Times are ``time.monotonic()``.
+"""
+from __future__ import annotations
+
+import contextlib
+import statistics
+import threading
+import time
+import xmlrpc.client
+from dataclasses import dataclass, field
+from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
+
+import yaml
+
+from multimaster_bridge.core.invariant import Filters, MasterView, Side, proxy_nodes, violations
+from multimaster_bridge.core.sync import Filter
+
+BridgeCfg = Union[str, Mapping[str, Any], Sequence[Union[str, Mapping[str, Any]]]]
+
+
+def bridge_filters(cfg: BridgeCfg) -> Tuple[str, Filters]:
+    """(name, filters) of a bridge's configuration: a mapping of its parameters, a YAML file, or a list of either
+    overlaid in order (as bridge.launch loads config/bridge.yaml, then the host's file)."""
+    layers = [cfg] if isinstance(cfg, (str, Mapping)) else list(cfg)
+    merged: Dict[str, Any] = {}
+    for layer in layers:
+        if isinstance(layer, str):
+            with open(layer) as f:
+                layer = yaml.safe_load(f) or {}
+        merged.update(layer)
+    if not merged.get('name'):
+        raise ValueError(f'bridge configuration {cfg!r}: name: missing')
+
+    def globs(key: str) -> List[str]:
+        value = merged.get(key) or []
+        return [value] if isinstance(value, str) else list(value)
+    return (str(merged['name']).strip('/'),
+            Filters(Filter(globs('allow_topics'), globs('deny_topics')),
+                    Filter(globs('allow_services'), globs('deny_services'))))
+
+
+class MasterReader:
+    """Master API calls to one master, from inside ``netns`` if given."""
+
+    def __init__(self, uri: str, netns: Optional[str] = None, caller_id: str = '/restore_watch') -> None:
+        self.uri = uri
+        self.netns = netns
+        self.caller_id = caller_id
+
+    @contextlib.contextmanager
+    def _place(self) -> Iterator[None]:
+        if self.netns is None:
+            yield
+            return
+        from cnr_testbed import netns   # the testbed's namespaces: only when asked for
+        with netns.inside(self.netns):
+            yield
+
+    def system_state(self) -> Tuple[list, list, list]:
+        with self._place():
+            code, msg, state = xmlrpc.client.ServerProxy(self.uri).getSystemState(self.caller_id)
+        if code != 1:
+            raise RuntimeError(f'getSystemState at {self.uri}: {msg}')
+        return state
+
+    def node_uris(self, nodes: Sequence[str]) -> Dict[str, str]:
+        if not nodes:
+            return {}
+        with self._place():
+            multi = xmlrpc.client.MultiCall(xmlrpc.client.ServerProxy(self.uri))
+            for n in nodes:
+                multi.lookupNode(self.caller_id, n)
+            answers = list(multi())
+        return {n: uri for n, (code, _, uri) in zip(nodes, answers) if code == 1}
+
+
+def check(a: Tuple[str, MasterReader, Filters], b: Tuple[str, MasterReader, Filters]) -> List[str]:
+    """The invariant's violations between two live masters (``(bridge name, reader, filters)`` each); the URIs are
+    looked up only once the registrations match."""
+    sides = [Side(name, MasterView.from_system_state(reader.system_state()), filters) for name, reader, filters in (a, b)]
+    wrong = violations(*sides)
+    if wrong:
+        return wrong
+    readers = {a[0]: a[1], b[0]: b[1]}
+    for here, there in ((sides[0], sides[1]), (sides[1], sides[0])):
+        mine = proxy_nodes(here, there.name)
+        prefix_len = len(there.name) + 2
+        theirs = sorted({'/' + n[prefix_len:] for n in mine})
+        here.view.uris.update(readers[here.name].node_uris(sorted(mine)))
+        there.view.uris.update(readers[there.name].node_uris(theirs))
+    return violations(*sides)
+
+
+@dataclass
+class RestoreResults:
+    """Per outage, seconds from the link's return until the invariant held for good (None: it never did before
+    the next outage began or the watch ended)."""
+    restores: List[Optional[float]] = field(default_factory=list)
+    last_problems: List[List[str]] = field(default_factory=list)   # per outage: what was wrong last (if anything)
+
+    @property
+    def restored(self) -> List[float]:
+        return [r for r in self.restores if r is not None]
+
+    @property
+    def unrestored(self) -> int:
+        return sum(r is None for r in self.restores)
+
+    @property
+    def median(self) -> Optional[float]:
+        return statistics.median(self.restored) if self.restored else None
+
+    @property
+    def max(self) -> Optional[float]:
+        return max(self.restored) if self.restored else None
+
+
+class RestoreWatch:
+    """Polls two bridged masters every ``interval`` s in a thread and times each restore of the invariant.
+
+    Args:
+        robot_master_uri, cloud_master_uri: the masters' URIs.
+        robot_bridge_cfg, cloud_bridge_cfg: each bridge's configuration (see :func:`bridge_filters`).
+        robot_netns, cloud_netns: network namespaces to reach the masters from (the testbed's), or None.
+        interval: seconds between polls (the resolution of the restore times).
+    """
+
+    def __init__(self, robot_master_uri: str, cloud_master_uri: str, robot_bridge_cfg: BridgeCfg,
+                 cloud_bridge_cfg: BridgeCfg, robot_netns: Optional[str] = None, cloud_netns: Optional[str] = None,
+                 interval: float = 0.05) -> None:
+        robot_name, robot_filters = bridge_filters(robot_bridge_cfg)
+        cloud_name, cloud_filters = bridge_filters(cloud_bridge_cfg)
+        self.sides = ((robot_name, MasterReader(robot_master_uri, robot_netns), robot_filters),
+                      (cloud_name, MasterReader(cloud_master_uri, cloud_netns), cloud_filters))
+        self.interval = interval
+        self._lock = threading.Lock()
+        self._samples: List[Tuple[float, List[str]]] = []     # (time after the poll, violations)
+        self._began: List[float] = []
+        self._ended: List[float] = []
+        self._stop = threading.Event()
+        self._thread: Optional[threading.Thread] = None
+        self.errors = 0
+
+    def check_now(self) -> List[str]:
+        """One check of the invariant (what is wrong; empty: it holds). A master that does not answer is a
+        violation."""
+        try:
+            return check(*self.sides)
+        except (OSError, RuntimeError, xmlrpc.client.Error) as exc:
+            self.errors += 1
+            return [f'a master did not answer: {exc}']
+
+    def start(self) -> 'RestoreWatch':
+        self._thread = threading.Thread(target=self._run, name='restore-watch', daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> 'RestoreWatch':
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join()
+        return self
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            started = time.monotonic()
+            wrong = self.check_now()
+            with self._lock:
+                self._samples.append((time.monotonic(), wrong))
+            self._stop.wait(max(0.0, started + self.interval - time.monotonic()))
+
+    def outage_began(self, t: Optional[float] = None) -> None:
+        """An outage began at ``t`` (default now): it ends the previous outage's window."""
+        with self._lock:
+            self._began.append(time.monotonic() if t is None else t)
+
+    def outage_ended(self, t: Optional[float] = None) -> None:
+        """The link returned at ``t`` (default now)."""
+        with self._lock:
+            self._ended.append(time.monotonic() if t is None else t)
+
+    def holds(self) -> bool:
+        """Whether the last poll found the invariant holding."""
+        with self._lock:
+            return bool(self._samples) and not self._samples[-1][1]
+
+    def restored_since(self, t: float) -> Optional[float]:
+        """Seconds from ``t`` to the first poll of the current unbroken run of holding polls, if the last poll
+        held and that run started after ``t`` began to be watched (None otherwise)."""
+        with self._lock:
+            samples = [s for s in self._samples if s[0] >= t]
+        return _restore(samples, t)
+
+    def problems(self) -> List[str]:
+        with self._lock:
+            return list(self._samples[-1][1]) if self._samples else ['not polled yet']
+
+    def results(self) -> RestoreResults:
+        """Per outage ended: the restore time within its window (up to the next outage's begin or now)."""
+        with self._lock:
+            samples = list(self._samples)
+            began, ended = sorted(self._began), list(self._ended)
+        out = RestoreResults()
+        for t in ended:
+            window_end = min((b for b in began if b >= t), default=float('inf'))
+            window = [s for s in samples if t <= s[0] < window_end]
+            out.restores.append(_restore(window, t))
+            out.last_problems.append(next((w for _, w in reversed(window) if w), []))
+        return out
+
+
+def _restore(window: List[Tuple[float, List[str]]], t: float) -> Optional[float]:
+    """Seconds from ``t`` to the first sample from which every sample of ``window`` holds (None: the last does
+    not). A sample's time is when its poll ended, so the poll before it bounds the restore from below: the
+    reported time is that of the first holding poll's end."""
+    if not window or window[-1][1]:
+        return None
+    first = len(window) - 1
+    while first > 0 and not window[first - 1][1]:
+        first -= 1
+    return max(0.0, window[first][0] - t)
+
+
+__all__ = ['MasterReader', 'RestoreResults', 'RestoreWatch', 'bridge_filters', 'check']
