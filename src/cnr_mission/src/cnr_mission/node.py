@@ -24,6 +24,7 @@ from cnr_maps.mapio import load_map
 from cnr_maps.measurements import Measurement, write_tsv
 from cnr_mission.core.report import CellSummary, check_store, path_length, render_png, write_summary
 from cnr_mission.core.scenario import read_mission
+from cnr_mission.core.timeline import write_timeline
 from cnr_mission.core.task import COMPLETED, TIMED_OUT, battery_used
 from cnr_msgs.msg import (BatteryEnergy, CellStates, Hotspot, MergedMeasurement, MfgActivity, MigrationEvent,
                           NetworkProfile, Placement, SearchState, StoreForwardStatus, TaskDecision)
@@ -329,7 +330,7 @@ class MissionMonitor:
                                                 temperature=h.temperature, search_duration=h.search_duration,
                                                 cells_checked=h.cells_checked),
             sim_time_to_find=None if h is None else h.header.stamp.to_sec() - self.start_sim,
-            sim_time_total=now - self.start_sim, wall_time=time.monotonic() - self.wall0,
+            sim_time_start=self.start_sim, sim_time_total=now - self.start_sim, wall_time=time.monotonic() - self.wall0,
             real_time_factor=self.rtf, distance_driven=path_length(traj),
             battery_used_percent=None if b0 is None else 100.0 * (b0.percentage - b1.percentage),
             battery_used_ah=None if b0 is None else b0.charge - b1.charge,
@@ -378,6 +379,10 @@ class MissionMonitor:
                                         if h else 'no hotspot found')
             render_png(os.path.join(self.report_dir, 'mapcells.png'), cells, traj, h.cell_index if h else None,
                        title, occ, extent, self.sources)
+        try:     # where each module ran, the link, measurements per second, decisions and migrations
+            write_timeline(self.report_dir, summary)
+        except Exception as exc:    # matplotlib's many errors: the report must still be written
+            rospy.logwarn(f'timeline not drawn: {exc}')
         # written last (atomically): its presence means the report is complete
         write_summary(os.path.join(self.report_dir, 'summary.json'), summary)
         return self.report_dir

@@ -152,11 +152,25 @@ def run_two_host(args: argparse.Namespace, scenario: str, name: str, map_file: s
     if os.geteuid() != 0:
         raise ScriptError('--two-host needs root (network namespaces, TUN devices, cgroups)')
     log(PROG, f'scenario {name} ({scenario}) on two hosts, placement {placement}, report in {report}')
-    return run_two_host_mission(TwoHostOptions(
+    status = run_two_host_mission(TwoHostOptions(
         config_dir=os.path.join(WS, 'config'), scenario=scenario, map=map_file, start=start, placement=placement,
         report_dir=report, port=args.port or 11311, delay=args.delay, rate=args.rate, loss=args.loss,
         trace=args.trace, link_map=link_map, migration=args.migration, rule=args.rule,
         network_aware=args.network_aware))
+    redraw_timeline(report)
+    return status
+
+
+def redraw_timeline(report: str) -> None:
+    """The timeline again, with the link's conditions (link.tsv, written after the mission monitor's report)."""
+    from cnr_mission.core.timeline import write_timeline
+    try:
+        with open(os.path.join(report, 'summary.json')) as f:
+            summary = json.load(f)
+    except (OSError, ValueError):
+        return           # no report: outcome() says so
+    if os.path.isfile(os.path.join(report, 'link.tsv')):
+        write_timeline(report, summary)
 
 
 def run_single_master(args: argparse.Namespace, scenario: str, name: str, map_file: str, start: List[str],
@@ -220,18 +234,18 @@ def start_viewer(procs: Processes, scenario: str, report: str, view: bool, recor
     with open(os.path.join(logs, 'rviz.log'), 'w') as out:
         rviz = procs.start(viewer.rviz_argv(rviz_cfg), stdout=out, stderr=subprocess.STDOUT)
     log(PROG, f'--view: rviz on {display} ({rviz_cfg})')
-    return rviz, display, view_cfg.window_title
+    return rviz, display, view_cfg
 
 
 def save_view(viewer_state: Tuple, report: str) -> None:
     """rviz's last view (it keeps the markers after the mission's nodes stopped) as view.png in the report."""
     from cnr_viz.viewer import screenshot
-    rviz, display, title = viewer_state
+    rviz, display, view_cfg = viewer_state
     if rviz.poll() is not None:
         log(PROG, f'--view: rviz ended (status {rviz.returncode}) before the mission; no view.png')
         return
     try:
-        log(PROG, f'--view: the last view saved as {screenshot(display, title, report)}')
+        log(PROG, f'--view: the last view saved as {screenshot(display, view_cfg, report)}')
     except Exception as exc:      # Xlib raises its own classes; the report stands without the picture
         log(PROG, f'--view: no view.png ({exc})')
 

@@ -2,7 +2,8 @@
 
 ``grab(display, title_part, path)`` finds the top-level window whose name contains ``title_part`` (rviz names
 its window after the config file: ``mission.rviz - RViz``) and writes what it shows; with no such window, the
-whole screen.
+whole screen. ``render_panel`` finds where rviz draws the 3-D view in that window (OGRE's own X window: the
+deepest child covering a large part of it), for checking where a map point landed.
 """
 from __future__ import annotations
 
@@ -58,5 +59,32 @@ def window_present(display: str, title_part: str) -> Optional[bool]:
         return None
     try:
         return _find(d.screen().root, title_part) is not None
+    finally:
+        d.close()
+
+
+def render_panel(display: str, title_part: str) -> Optional[Tuple[int, int, int, int]]:
+    """(x, y, width, height) in the window named with ``title_part`` of its deepest child window covering at
+    least a quarter of it (rviz's render panel), or None."""
+    from Xlib import display as xdisplay
+
+    d = xdisplay.Display(display)
+    try:
+        top = _find(d.screen().root, title_part)
+        if top is None:
+            return None
+        tg = top.get_geometry()
+        best = None       # (depth, x, y, w, h)
+
+        def walk(win, depth: int, ox: int, oy: int) -> None:
+            nonlocal best
+            for child in win.query_tree().children:
+                g = child.get_geometry()
+                x, y = ox + g.x, oy + g.y
+                if g.width * g.height >= tg.width * tg.height / 4 and (best is None or depth > best[0]):
+                    best = (depth, x, y, g.width, g.height)
+                walk(child, depth + 1, x, y)
+        walk(top, 1, 0, 0)
+        return None if best is None else best[1:]
     finally:
         d.close()

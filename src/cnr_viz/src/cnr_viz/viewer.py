@@ -10,6 +10,7 @@
 """
 from __future__ import annotations
 
+import json
 import os
 import shutil
 from typing import List, Tuple
@@ -21,6 +22,7 @@ from cnr_viz.core.view import TopDownView, ViewConfig, fit, rviz_config
 RVIZ_CONFIG = 'mission.rviz'
 SCREENSHOT = 'view.png'
 BAG = 'mission.bag'
+PANEL = 'rviz_panel.json'
 
 
 def display_problem(display: str) -> str:
@@ -65,9 +67,19 @@ def record_argv(config_dir: str, report_dir: str) -> List[str]:
     return ['rosbag', 'record', '--quiet', '-O', os.path.join(report_dir, BAG), *record_topics(config_dir)]
 
 
-def screenshot(display: str, title: str, report_dir: str) -> str:
-    """rviz's window as ``report_dir/view.png``; the path."""
-    from cnr_viz.screenshot import grab
+def screenshot(display: str, view: ViewConfig, report_dir: str) -> str:
+    """rviz's window (waited for up to ``view.window_timeout``) as ``report_dir/view.png`` and where its render
+    panel is in it (x, y, width, height px, ``logs/rviz_panel.json``: where a map point lands, with
+    :meth:`TopDownView.project`); the image's path."""
+    from cnr_harness import wait_until
+    from cnr_viz.screenshot import grab, render_panel, window_present
+    title = view.window_title
+    wait_until(lambda: window_present(display, title), view.window_timeout, "rviz's window")
     path = os.path.join(report_dir, SCREENSHOT)
+    panel = render_panel(display, title)
     grab(display, title, path)
+    if panel is not None:
+        os.makedirs(os.path.join(report_dir, 'logs'), exist_ok=True)
+        with open(os.path.join(report_dir, 'logs', PANEL), 'w') as f:
+            json.dump(list(panel), f)
     return path

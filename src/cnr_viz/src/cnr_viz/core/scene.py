@@ -106,7 +106,7 @@ class ColorScale:
         else:
             f = min(1.0, (t - self.ambient) / (self.threshold - self.ambient)) if self.threshold > self.ambient else 1.0
             a, b = self.mid, self.hot
-        return tuple(x + f * (y - x) for x, y in zip(a, b))
+        return tuple(x * (1.0 - f) + y * f for x, y in zip(a, b))
 
 
 @dataclass(frozen=True)

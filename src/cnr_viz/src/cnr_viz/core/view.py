@@ -18,6 +18,7 @@ class ViewConfig:
     margin: Tuple[float, float]        # m
     center_shift: float                # m
     window_title: str
+    window_timeout: float              # s (wall)
 
     @classmethod
     def from_section(cls, p: Section) -> 'ViewConfig':
@@ -28,7 +29,8 @@ class ViewConfig:
         margin = v.vector('margin', 2)
         if min(margin) < 0:
             raise v.error('margin', f'expected two margins >= 0 m, got {margin}')
-        return cls(tuple(panel), tuple(margin), v.number('center_shift'), v.string('window_title'))
+        return cls(tuple(panel), tuple(margin), v.number('center_shift'), v.string('window_title'),
+                   v.number('window_timeout', positive=True))
 
 
 @dataclass(frozen=True)
