@@ -47,6 +47,10 @@ PKGS=(
   python3-netifaces
   # the testbed: network namespaces, ping, iperf3; pgrep
   iproute2 iputils-ping iperf3 procps
+  # watching the mission (cnr_viz, run_mission.sh --view/--record): rviz and the markers' messages, a virtual
+  # display and Mesa's software GL for rviz without a screen (its test), the screenshot's X client
+  # (python3-xlib); rosbag comes with ros-core
+  rviz ros-visualization-msgs python3-visualization-msgs xvfb libgl1-mesa-dri python3-xlib
 )
 
 missing=()
