@@ -14,6 +14,7 @@ import time
 from typing import Dict, List, Optional, Tuple
 
 import rospy
+from actionlib_msgs.msg import GoalStatusArray
 from nav_msgs.msg import Odometry
 from sensor_msgs.msg import BatteryState
 from std_srvs.srv import Trigger, TriggerResponse
@@ -36,6 +37,7 @@ from migration_manager.codes import EVENT_MODE_WORD, STEP_WORD
 from network_monitor.codes import A_BW_METHOD_WORD
 from network_monitor.decider_codes import EVENT_WORD, FORCE, MISSION_STATUS, PLACEMENT_WORD, REASON_WORD
 from kestrel_driver.core.field import TemperatureField
+from mfg.core.standin import GoalPath, Standstill, read_watch
 
 
 class MissionMonitor:
@@ -81,6 +83,11 @@ class MissionMonitor:
         rospy.Subscriber('mfg/state', SearchState, self._on_state, queue_size=20)
         self.activity_received = 0.0
         rospy.Subscriber('mfg/activity', MfgActivity, self._on_activity, queue_size=1)
+        # the longest standstill with a task pending: move_base's goals and the goal source's heartbeat and
+        # mode judged as the robot's stand-in judges them (config/goal_standin.yaml, mfg.core.standin)
+        self.goal_path = GoalPath(read_watch(p))
+        self.standstill = Standstill()
+        rospy.Subscriber('move_base/status', GoalStatusArray, self._on_goal_status, queue_size=5)
         if profile_topic:
             rospy.Subscriber(profile_topic, NetworkProfile, self._on_profile, queue_size=10)
         # migration_manager (two-host runs with --migration): each migration's steps and the placement over time
@@ -132,6 +139,19 @@ class MissionMonitor:
 
     def _on_activity(self, msg: MfgActivity) -> None:
         self.activity, self.activity_received = msg, rospy.Time.now().to_sec()
+        with self.lock:
+            self.goal_path.heartbeat(self.activity_received)
+
+    def _on_goal_status(self, msg: GoalStatusArray) -> None:
+        with self.lock:
+            self.goal_path.status(rospy.Time.now().to_sec(), [(s.goal_id.id, s.status) for s in msg.status_list])
+
+    def _sample_standstill(self) -> None:
+        now = rospy.Time.now().to_sec()
+        with self.lock:
+            since = self.goal_path.standing_since(now)
+            rate = self.rtf if self.rtf > 0 else 1.0
+            self.standstill.sample(now, since, time.time() - (now - since) / rate if since is not None else 0.0)
 
     def _on_profile(self, msg: NetworkProfile) -> None:
         if self.start_sim is not None:
@@ -229,6 +249,8 @@ class MissionMonitor:
             self._say(f'{self.measurements} measurements; latest {msg.temperature:.2f} degC at ({msg.x:.1f}, {msg.y:.1f})')
 
     def _on_state(self, msg: SearchState) -> None:
+        with self.lock:
+            self.goal_path.source_mode(rospy.Time.now().to_sec(), msg.mode)
         if msg.message != self.last_state:
             self.last_state = msg.message
             self._say(f'{msg.mode}: {msg.message}')
@@ -244,6 +266,7 @@ class MissionMonitor:
             time.sleep(0.1)
         while not rospy.is_shutdown():
             now = rospy.Time.now().to_sec()
+            self._sample_standstill()
             if self.hotspot is not None and now >= self.hotspot.header.stamp.to_sec() + self.extra_time:
                 return True
             if now - self.start_sim > self.timeout:
@@ -272,6 +295,15 @@ class MissionMonitor:
             time.sleep(0.2)
         r = self.relay
         self._say('store-and-forward NOT drained: ' + ('no status' if r is None else f'{r.queued} still queued'))
+
+    def _standstill_report(self) -> Dict:
+        with self.lock:
+            s, pending = self.standstill, self.goal_path.pending_since
+            t0 = self.start_sim or 0.0
+            return dict(longest=s.longest, longest_start=s.longest_wall,
+                        longest_start_sim=None if s.longest_since is None else s.longest_since - t0,
+                        intervals=s.intervals, total=s.total, open_at_end=s.open,
+                        task_pending_from_sim=None if pending is None else pending - t0)
 
     def write_report(self, found: bool) -> str:
         os.makedirs(self.report_dir, exist_ok=True)
@@ -364,6 +396,10 @@ class MissionMonitor:
                 # the MFG's reports stop reaching the robot when it is cut off (it runs on the cloud): the time
                 # since the last one is time the MFG could not act on the robot
                 unreachable_at_end=now - self.activity_received),
+            # the longest interval with a task pending (from the first move_base goal) in which the robot had no
+            # goal pursued and the goal source did not hold it on purpose (mfg.core.standin.GoalPath): s of sim
+            # time; longest_start: wall clock (UNIX s), longest_start_sim: s since the mission's start
+            standstill=self._standstill_report(),
             heat_sources=[dict(name=n, x=x, y=y) for n, x, y in self.sources],
             migrations=migrations or None,
             placement_over_time=None if not placements else dict(file='placement.tsv', changes=len(placements)))

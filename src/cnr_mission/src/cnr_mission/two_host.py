@@ -252,6 +252,8 @@ class TwoHostMission:
                               f'migration_log_dir:={os.path.join(self.log_dir, "instances")}']
             if side.side == 'robot':
                 host_args.append('kestrel_driver:=true')
+                if self.goal_standin:
+                    host_args.append('goal_standin:=true')
             elif self.placement.host('move_base') == 'cloud' or 'move_base' in self.placement.managed:
                 host_args.append('map_server:=true')
             if self.task:
@@ -268,6 +270,12 @@ class TwoHostMission:
             self.procs['follow'] = self.robot.run(tb_cli + ['follow', '--map', self.link_map], 'follow')
         if self.deferred_merger:             # after the trace: its time 0 is the mission's start
             self._start_merger_once_stored(common)
+
+    @property
+    def goal_standin(self) -> bool:
+        """The robot runs goal_standin (mfg package) when its goal source, mfg, may be off the robot: placed on the
+        cloud or movable (no mfg runs in task mode)."""
+        return self.task is None and (self.placement.host('mfg') != 'robot' or 'mfg' in self.placement.managed)
 
     @property
     def deferred_merger(self) -> Optional[str]:
