@@ -24,6 +24,10 @@ NAME = f'flp{os.getpid() % 10000}'
 ALLOW = ['/flap/*', '/clock']
 SHARED = '/flap/shared'             # served on both hosts: the cloud's provider is the newer one
 SEED, COUNT = 18, 8                 # cuts of 1.3-6.7 s (up only, down only, both) and loss bursts; ~41 s in all
+# a longer measurement: BRIDGE_FLAP_SEED=7 BRIDGE_FLAP_COUNT=24 BRIDGE_FLAP_WIDE=1 (outages 0.2-15 s, gaps 0.5-20 s)
+SEED = int(os.environ.get('BRIDGE_FLAP_SEED', SEED))
+COUNT = int(os.environ.get('BRIDGE_FLAP_COUNT', COUNT))
+WIDE = os.environ.get('BRIDGE_FLAP_WIDE', '') == '1'
 RESTORE_LIMIT = 1.0                 # s after the link returns
 SETTLE = 1.2                        # an outage is checked when the link stays up at least this long after it
 
@@ -210,7 +214,7 @@ def test_every_outage_is_followed_by_a_full_restore_and_connections_come_back(fl
     from cnr_testbed.core.flap import FlapSettings, onset, schedule
     hosts, bridges, nodes, watch = flapping
     tb, robot, cloud = hosts.tb, hosts.robot, hosts.cloud
-    events = schedule(SEED, COUNT, FlapSettings(outage=(0.3, 8.0), gap=(0.5, 8.0)))
+    events = schedule(SEED, COUNT, FlapSettings() if WIDE else FlapSettings(outage=(0.3, 8.0), gap=(0.5, 8.0)))
     t0 = time.monotonic()
     shift = 0.0                       # a check that took longer than the gap delays the rest of the schedule
     checked = []
@@ -245,7 +249,7 @@ def test_every_outage_is_followed_by_a_full_restore_and_connections_come_back(fl
         r = results.restores[i]
         print(f'{event.describe()}: ' + (f'restored {r:.3f} s after the link returned' if r is not None else
                                          'next outage before a restore'))
-    print(f'{len(events)} outages, {len(restores)} checked: restore median {statistics.median(restores):.3f} s, '
+    print(f'seed {SEED}: {len(events)} outages, {len(restores)} checked: restore median {statistics.median(restores):.3f} s, '
           f'max {max(restores):.3f} s; all served again {served:.2f} s after the last check')
     assert not health(nodes), '; '.join(health(nodes))
     assert max(restores) <= RESTORE_LIMIT, f'restores took {sorted(restores)} s'
