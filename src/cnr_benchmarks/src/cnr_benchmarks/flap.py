@@ -39,6 +39,7 @@ SCENARIO = os.path.join(results.WS, 'config', 'scenarios', 'corridor.yaml')
 STARTED = 'measurements; latest'       # the mission monitor's progress line every 30 measurements
 FOUND = 'hotspot found in'
 START_LIMIT = 420.0                    # s for the mission to come up (migration: modules start under the CPU cap)
+MASTER_PORT = 11311                    # the two-host mission's masters (run_mission.sh --port default)
 END_LIMIT = 900.0                      # s after the schedule for the mission to end
 CLEAR = {'outage': False, 'loss': 0.0}
 
@@ -75,11 +76,11 @@ def play(tb: Testbed, events: List[Outage], watch) -> List[dict]:
         time.sleep(max(0.0, t0 + e.start - time.monotonic()))
         tb.set(e.direction, **onset(e))
         wall_start = time.time()
-        watch.outage_began(wall_start)
+        watch.outage_began()
         time.sleep(max(0.0, t0 + e.end - time.monotonic()))
         tb.set(e.direction, **CLEAR)
         wall_end = time.time()
-        watch.outage_ended(wall_end)
+        watch.outage_ended()
         played.append(dict(index=i, start=e.start, duration=e.duration, direction=e.direction, kind=e.kind,
                            loss=e.loss, wall_start=wall_start, wall_end=wall_end))
         report.progress(f'  outage {i + 1}/{len(events)}: {e.describe()}')
@@ -93,9 +94,19 @@ def finish_mission(tb: Testbed) -> None:
                timeout=30)
 
 
+def restore_watch(tb: Testbed, folder: str):
+    """Both masters of the testbed, polled from their namespaces against the bridges' configurations the mission
+    wrote (config/bridge.yaml overlaid by the host's allow-lists in ``<folder>/logs``)."""
+    from multimaster_bridge.watch import RestoreWatch
+    shared = os.path.join(results.WS, 'config', 'bridge.yaml')
+    return RestoreWatch(f'http://{tb.robot_address}:{MASTER_PORT}', f'http://{tb.cloud_address}:{MASTER_PORT}',
+                        [shared, os.path.join(folder, 'logs', 'bridge_robot.yaml')],
+                        [shared, os.path.join(folder, 'logs', 'bridge_cloud.yaml')],
+                        robot_netns=tb.namespace('robot'), cloud_netns=tb.namespace('cloud'))
+
+
 def run_one(tb: Testbed, config: str, index: int, folder: str, events: List[Outage]) -> int:
     """One mission of ``config`` under ``events``; its exit status (a failed run leaves no summary.json)."""
-    from multimaster_bridge.watch import RestoreWatch
     shutil.rmtree(folder, ignore_errors=True)
     os.makedirs(os.path.dirname(folder), exist_ok=True)
     argv = [RUN_MISSION, *core.mission_args(config), '--scenario', scenario_file(folder), '--delay', '0',
@@ -104,12 +115,12 @@ def run_one(tb: Testbed, config: str, index: int, folder: str, events: List[Outa
     with open(log_path, 'w') as log:
         proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT)
     played: List[dict] = []
-    watch = RestoreWatch.for_testbed(tb)
+    watch = None
     try:
         if not wait_for_line(log_path, STARTED, proc, START_LIMIT):
             report.progress(f'  the mission did not start (see {log_path})')
         else:
-            watch.start()
+            watch = restore_watch(tb, folder).start()
             played = play(tb, events, watch)
             time.sleep(5.0)                   # the last outage's restore
             watch.stop()
@@ -124,13 +135,15 @@ def run_one(tb: Testbed, config: str, index: int, folder: str, events: List[Outa
         proc.terminate()
         status = proc.wait()
     finally:
-        watch.stop()
+        if watch is not None:
+            watch.stop()
         tb.set('both', **CLEAR)
     os.makedirs(folder, exist_ok=True)
     results.write_tsv(os.path.join(folder, 'schedule.tsv'), core.SCHEDULE_COLUMNS,
                       [[p[c] for c in core.SCHEDULE_COLUMNS] for p in played])
     results.write_tsv(os.path.join(folder, 'restore.tsv'), core.RESTORE_COLUMNS,
-                      [[i, p['wall_end'], r] for i, (p, r) in enumerate(zip(played, watch.results()))])
+                      [[i, p['wall_end'], r] for i, (p, r) in
+                       enumerate(zip(played, watch.results().restores if watch is not None else []))])
     with open(os.path.join(folder, 'status'), 'w') as f:
         f.write(f'{status}\n')
     if status == report.EXIT_INTERRUPTED:
