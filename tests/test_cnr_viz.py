@@ -100,7 +100,7 @@ def test_module_line_when_the_link_is_down_and_without_a_link():
 
 
 def test_the_view_fits_the_grid_and_projects_points(grid):
-    cfg = ViewConfig((900.0, 600.0), (1.0, 3.0), 0.5, 'RViz')
+    cfg = ViewConfig((900.0, 600.0), (1.0, 3.0), 0.5, 'RViz', 60.0)
     v = fit(grid, cfg)
     assert (v.x, v.y) == (5.5, 0.5) and math.isclose(v.scale, min(900 / 13, 600 / 8))
     col, row = v.project(5.5, 0.5, cfg.panel)
@@ -128,7 +128,6 @@ def test_the_timeline_is_drawn_from_a_report_folder(tmp_path):
     (tmp_path / 'network_profile.tsv').write_text('time\talive\trtt\trtt_spread\tloss\tc_bw\ta_bw\tr_bw\n'
                                                   '1\t1\t0.004\t0\t0\t1\t1\t1\n2\t0\tnan\tnan\tnan\t1\t1\t1\n'
                                                   '5\t1\t0.005\t0\t0\t1\t1\t1\n')
-    (tmp_path / 'link.tsv').write_text('t\tup_outage\tdown_outage\n0\tFalse\tFalse\n3\tTrue\tTrue\n4\tFalse\tFalse\n')
     (tmp_path / 'measurements.tsv').write_text('measurement\ttime\tx\ty\ttemperature\tcell\trow\tcol\tpose_time\n'
                                                '1\t100.5\t0\t0\t22\t0\t0\t0\t100.5\n2\t101.2\t0\t0\t22\t0\t0\t0\t101.2\n')
     (tmp_path / 'decisions.tsv').write_text('time\tevent\tdecision\n0.5\tdecided\toffload\n')
@@ -137,7 +136,7 @@ def test_the_timeline_is_drawn_from_a_report_folder(tmp_path):
                                                            outcome='done')])
     tl = from_report(str(tmp_path), summary)
     assert tl.hosts['mfg'] == [(0.0, 'robot', 1), (10.0, '-', 1), (10.5, 'cloud', 2)]
-    assert tl.down == [(2.0, 5.0)] and tl.outages == [(3.0, 4.0)]
+    assert tl.down == [(2.0, 5.0)]
     assert tl.measurement_times == pytest.approx([0.5, 1.2])
     assert tl.decisions == [(0.5, 'decided: offload')] and tl.migrations[0][:2] == (10.0, 'mfg')
     path = write_timeline(str(tmp_path), summary)

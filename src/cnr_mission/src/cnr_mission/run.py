@@ -152,25 +152,11 @@ def run_two_host(args: argparse.Namespace, scenario: str, name: str, map_file: s
     if os.geteuid() != 0:
         raise ScriptError('--two-host needs root (network namespaces, TUN devices, cgroups)')
     log(PROG, f'scenario {name} ({scenario}) on two hosts, placement {placement}, report in {report}')
-    status = run_two_host_mission(TwoHostOptions(
+    return run_two_host_mission(TwoHostOptions(
         config_dir=os.path.join(WS, 'config'), scenario=scenario, map=map_file, start=start, placement=placement,
         report_dir=report, port=args.port or 11311, delay=args.delay, rate=args.rate, loss=args.loss,
         trace=args.trace, link_map=link_map, migration=args.migration, rule=args.rule,
-        network_aware=args.network_aware))
-    redraw_timeline(report)
-    return status
-
-
-def redraw_timeline(report: str) -> None:
-    """The timeline again, with the link's conditions (link.tsv, written after the mission monitor's report)."""
-    from cnr_mission.core.timeline import write_timeline
-    try:
-        with open(os.path.join(report, 'summary.json')) as f:
-            summary = json.load(f)
-    except (OSError, ValueError):
-        return           # no report: outcome() says so
-    if os.path.isfile(os.path.join(report, 'link.tsv')):
-        write_timeline(report, summary)
+        network_aware=args.network_aware, view=view_display(args.view), record=args.record))
 
 
 def run_single_master(args: argparse.Namespace, scenario: str, name: str, map_file: str, start: List[str],
@@ -222,19 +208,28 @@ def start_viewer(procs: Processes, scenario: str, report: str, view: bool, recor
         with open(os.path.join(logs, 'rosbag_record.log'), 'w') as out:
             procs.start(viewer.record_argv(config_dir, report), stdout=out, stderr=subprocess.STDOUT)
         log(PROG, f'recording the mission into {os.path.join(report, viewer.BAG)}')
-    if not view:
-        return None
-    display = os.environ.get('DISPLAY', '')
-    why = viewer.display_problem(display)
-    if why:
-        log(PROG, f'--view: rviz not opened: {why}; the markers are on /viz_markers/markers')
+    display = view_display(view)
+    if not display:
         return None
     os.makedirs(logs, exist_ok=True)
     rviz_cfg, _, view_cfg = viewer.write_rviz_config(config_dir, scenario, logs)
     with open(os.path.join(logs, 'rviz.log'), 'w') as out:
         rviz = procs.start(viewer.rviz_argv(rviz_cfg), stdout=out, stderr=subprocess.STDOUT)
-    log(PROG, f'--view: rviz on {display} ({rviz_cfg})')
     return rviz, display, view_cfg
+
+
+def view_display(view: bool) -> str:
+    """The display rviz opens on with ``--view`` ('' with one line why not, or without ``--view``)."""
+    if not view:
+        return ''
+    from cnr_viz.viewer import display_problem
+    display = os.environ.get('DISPLAY', '')
+    why = display_problem(display)
+    if why:
+        log(PROG, f'--view: rviz not opened: {why}; the markers are on /viz_markers/markers')
+        return ''
+    log(PROG, f'--view: rviz on {display}')
+    return display
 
 
 def save_view(viewer_state: Tuple, report: str) -> None:

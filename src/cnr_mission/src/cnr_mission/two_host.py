@@ -106,6 +106,8 @@ class TwoHostMission:
         self.task = task
         self.network_aware = network_aware
         self.training_dir, self.control_values = '', ''      # '' = config/decision.yaml's
+        self.view_display, self.record = '', False             # run_mission.sh --view (its display), --record
+        self.view_cfg = None
         self.migration = migration or rule or task is not None or bool(network_aware)
         self.rule = rule
         if self.migration:
@@ -227,8 +229,9 @@ class TwoHostMission:
                                            f'relay_drain_timeout:={self.relay_drain_timeout}',
                                            *(self.task.world_args(self.testbed.config_path) if self.task else []),
                                            *([f'decider:={DECIDER}', f'decision_task:={self.network_aware}']
-                                             if self.network_aware else [])],
+                                             if self.network_aware else []), *self.viz_args()],
                      until='task_runner' if self.task else 'mission_monitor')
+        self.start_viewer()
         for side, peer in ((self.robot, self.cloud), (self.cloud, self.robot)):
             store = f'store_{side.side}.tsv' if self.migration else 'store.tsv'
             host_args = ['cnr_mission', 'host.launch', f'host:={side.side}', *common,
@@ -324,6 +327,35 @@ class TwoHostMission:
         self._launch(side, 'merger', ['cnr_mission', 'modules.launch', *common, f'store:={store}', 'merger:=true'],
                      prefix=self._robot_cpu() if host == 'robot' else None)
 
+    # -- run_mission.sh --view / --record: cnr_viz's markers on the robot's master, rviz and rosbag beside it ----
+    def viz_args(self) -> List[str]:
+        if not (self.view_display or self.record):
+            return []
+        return ['viz:=true', f'link_map:={self.link_map or ""}']
+
+    def start_viewer(self) -> None:
+        from cnr_viz import viewer
+        if self.record:
+            self.procs['record'] = self.robot.run(viewer.record_argv(self.config, self.report_dir), 'record')
+        if self.view_display:
+            path, _, self.view_cfg = viewer.write_rviz_config(self.config, self.scenario_file, self.log_dir)
+            self.procs['rviz'] = self.robot.run(viewer.rviz_argv(path), 'rviz', env={'DISPLAY': self.view_display})
+
+    def save_view(self) -> None:
+        """rviz's last view as view.png in the report (it keeps the markers after the mission's nodes stopped)."""
+        from cnr_viz.viewer import screenshot
+        rviz = self.procs.get('rviz')
+        if rviz is None:
+            return
+        if rviz.poll() is not None:
+            print(f'[two-host] rviz ended (status {rviz.poll()}) before the mission; no view.png', flush=True)
+            return
+        try:
+            print(f'[two-host] the last view saved as {screenshot(self.view_display, self.view_cfg, self.report_dir)}',
+                  flush=True)
+        except Exception as exc:      # Xlib raises its own classes; the report stands without the picture
+            print(f'[two-host] no view.png ({exc})', flush=True)
+
     def watch(self) -> int:
         """Print the world launch's output until the mission monitor ends; the exit status."""
         world = self.procs['world']
@@ -336,6 +368,8 @@ class TwoHostMission:
             for name, proc in self.procs.items():
                 rc = proc.poll()
                 if name == 'trace' and rc == 0:       # a trace that has played to its end
+                    continue
+                if name in ('rviz', 'record'):        # the viewers: closing rviz does not end the mission
                     continue
                 if name != 'world' and rc is not None and status is None:
                     print(f'[two-host] {name} ended with status {rc} (log: {proc.log_path})', flush=True)
@@ -441,6 +475,8 @@ class TwoHostOptions:
     task_results: Optional[str] = None
     training_dir: str = ''
     control_values: str = ''
+    view: str = ''                  # the X display rviz opens on ('' = none)
+    record: bool = False            # rosbag of the mission into the report
 
 
 def parse_args(argv: Optional[List[str]]) -> TwoHostOptions:
@@ -459,6 +495,10 @@ def parse_args(argv: Optional[List[str]]) -> TwoHostOptions:
     task.add_argument('--task-results', help='results TSV the runs are appended to (resumes after its last run)')
     task.add_argument('--training-dir', default='', help="the decider's training sets ('' = config/decision.yaml's)")
     task.add_argument('--control-values', default='', help="the tasks' control values ('' = config/decision.yaml's)")
+    view = ap.add_argument_group('watching (run_mission.sh --view, --record)')
+    view.add_argument('--view', default='', metavar='DISPLAY', help="rviz on this X display, attached to the robot's "
+                      "master (cnr_viz's markers); its last view is saved as view.png in the report")
+    view.add_argument('--record', action='store_true', help='rosbag of the mission into mission.bag in the report')
     return TwoHostOptions(**vars(ap.parse_args(argv)))
 
 
@@ -518,6 +558,7 @@ def run(args: TwoHostOptions) -> int:
                                  task_mode(args), network_aware(args))
         mission.training_dir = os.path.abspath(args.training_dir) if args.training_dir else ''
         mission.control_values = os.path.abspath(args.control_values) if args.control_values else ''
+        mission.view_display, mission.record = args.view, args.record
     except ConfigError as exc:
         print(f'two_host_mission: {exc}', file=sys.stderr)
         return EXIT_CONFIG
@@ -529,6 +570,7 @@ def run(args: TwoHostOptions) -> int:
     try:
         mission.up()
         status = mission.watch()
+        mission.save_view()
     except Stop:
         status = EXIT_INTERRUPTED
     except (TestbedError, ConfigError) as exc:

@@ -21,6 +21,7 @@ import cnr_params
 from cnr_bringup.placement import load_catalog
 from cnr_maps.grid import MapcellGrid
 from cnr_msgs.msg import CellStates, Hotspot, MergedMeasurement, NetworkProfile, Placement, SearchState
+from cnr_params import ConfigError
 from cnr_params.ros import private_section
 from cnr_runtime import init_node
 from cnr_testbed.core.config import load_link_map
@@ -58,9 +59,13 @@ class VizNode:
             self.scene.hosts = {m: ('robot', 0) for m in self.cfg.modules}
             self.scene.placement_source = 'one master'
         else:
-            fixed = load_catalog(p.file_path('placements_file')).placement(placement)
-            self.scene.hosts = {m: (fixed.host(m), 0) for m in self.cfg.modules}
-            self.scene.placement_source = f'placement {fixed.name}'
+            try:
+                fixed = load_catalog(p.file_path('placements_file')).placement(placement)
+                self.scene.hosts = {m: (fixed.host(m), 0) for m in self.cfg.modules}
+                self.scene.placement_source = f'placement {fixed.name}'
+            except (ConfigError, KeyError) as exc:     # the view must not end the mission: hosts shown as '?'
+                rospy.logwarn(f'placement {placement!r} not shown: {exc}')
+                self.scene.placement_source = f'placement {placement}'
         link_map = p.string('link_map')
         self.link_map = load_link_map(link_map) if link_map else None
         self.lock = threading.Lock()

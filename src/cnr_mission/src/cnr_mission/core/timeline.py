@@ -1,13 +1,12 @@
 """The mission's timeline (``timeline.png`` in the report, ROS-free): a network-aware run at a glance.
 
 Four panels over the mission's sim time (s since its start): where each module ran (``placement.tsv``; a
-fixed placement or one master: the summary's), the link's RTT (``network_profile.tsv``) with its outages shaded
-(the profile's ``alive`` false; the emulator's outages from ``link.tsv``, whose clock is the wall clock since the
-two-host launch, so up to a few seconds early), the measurements per second (``measurements.tsv``), and the
-network-aware decisions (``decisions.tsv``) and migrations (the summary's ``migrations``) as events; the
-hotspot's time is marked on every panel. Reads the report folder and the summary (a dict: the mission monitor
-passes the one it is about to write; ``run_mission.sh`` reads ``summary.json`` again once the two-host run
-added ``link.tsv``).
+fixed placement or one master: the summary's), the link's RTT with its outages shaded (``network_profile.tsv``:
+the robot's network_monitor, ``alive`` false = no answer from the cloud; the emulator's ``link.tsv`` is not
+drawn: its clock starts when the two-host launches are up, not with the mission), the measurements per second
+(``measurements.tsv``), and the network-aware decisions (``decisions.tsv``) and migrations (the summary's
+``migrations``) as events; the hotspot's time is marked on every panel. Reads the report folder and the summary
+(a dict: the mission monitor passes the one it is about to write).
 """
 from __future__ import annotations
 
@@ -42,7 +41,6 @@ class Timeline:
     hosts: Dict[str, List[Tuple[float, str, int]]] = field(default_factory=dict)   # module -> [(t, host, term)]
     rtt: List[Tuple[float, float]] = field(default_factory=list)                  # (t, RTT ms)
     down: List[Tuple[float, float]] = field(default_factory=list)                 # profile: not alive, [t0, t1)
-    outages: List[Tuple[float, float]] = field(default_factory=list)              # emulator: cut, [t0, t1)
     measurement_times: List[float] = field(default_factory=list)
     decisions: List[Tuple[float, str]] = field(default_factory=list)             # (t, label)
     migrations: List[Tuple[float, str, str]] = field(default_factory=list)       # (t, module, label)
@@ -77,9 +75,6 @@ def from_report(report_dir: str, summary: Dict) -> Timeline:
     profile = _rows(os.path.join(report_dir, 'network_profile.tsv'))
     tl.rtt = [(_float(r['time']), 1000.0 * _float(r['rtt'])) for r in profile]
     tl.down = _intervals([(_float(r['time']), _float(r['alive']) < 0.5) for r in profile], end)
-    link = _rows(os.path.join(report_dir, 'link.tsv'))
-    tl.outages = _intervals([(_float(r['t']), 'True' in (r.get('up_outage'), r.get('down_outage'))) for r in link],
-                            end)
     if t0 is not None:
         tl.measurement_times = [_float(r['time']) - t0 for r in _rows(os.path.join(report_dir, 'measurements.tsv'))]
     for r in _rows(os.path.join(report_dir, 'decisions.tsv')):
@@ -96,7 +91,7 @@ def render(path: str, tl: Timeline) -> None:
     from matplotlib.patches import Patch
 
     fig, axes = plt.subplots(4, 1, sharex=True, figsize=(11, 7.5),
-                             gridspec_kw=dict(height_ratios=[max(1.2, 0.45 * len(tl.hosts)), 1.2, 1.0, 0.8]))
+                             gridspec_kw=dict(height_ratios=[max(1.2, 0.45 * len(tl.hosts)), 1.2, 1.0, 1.2]))
     ax_h, ax_r, ax_m, ax_e = axes
     end = max([tl.end] + [t for t in tl.measurement_times if math.isfinite(t)] + [0.0])
     modules = list(tl.hosts)
@@ -116,17 +111,15 @@ def render(path: str, tl: Timeline) -> None:
     ax_h.invert_yaxis()
     ax_h.legend(handles=[Patch(color=c, label=h if h != '-' else 'none (migrating)') for h, c in HOST_COLORS.items()]
                 + ([plt.Line2D([], [], color='k', marker='v', linestyle='', label='migration')] if tl.migrations else []),
-                loc='upper right', fontsize=7, ncol=4)
-    ax_h.set_title(f'{tl.title}: where each module ran', fontsize=10)
+                loc='lower right', bbox_to_anchor=(1.0, 1.0), fontsize=7, ncol=4, frameon=False)
+    ax_h.set_title(f'{tl.title}: where each module ran', fontsize=10, loc='left')
     for a, b in tl.down:
         ax_r.axvspan(a, b, color='red', alpha=0.15, lw=0)
-    for a, b in tl.outages:
-        ax_r.axvspan(a, b, ymin=0.0, ymax=0.12, color='black', alpha=0.5, lw=0)
     if tl.rtt:
         ts, rs = zip(*tl.rtt)
         ax_r.plot(ts, rs, '.-', color='tab:green', markersize=2, linewidth=0.8)
         ax_r.set_ylabel('RTT [ms]')
-        ax_r.set_title('link: RTT (network_monitor); red: peer not alive; black band: emulator outage', fontsize=9)
+        ax_r.set_title("link: RTT (the robot's network_monitor); red: no answer from the cloud (outage)", fontsize=9)
     else:
         ax_r.text(0.5, 0.5, 'one master: no link', transform=ax_r.transAxes, ha='center', va='center')
         ax_r.set_yticks([])
@@ -136,13 +129,12 @@ def render(path: str, tl: Timeline) -> None:
     ax_m.set_ylabel('meas./s')
     for t, label in tl.decisions:
         ax_e.axvline(t, color='tab:blue', linewidth=1)
-        ax_e.text(t, 0.75, label, rotation=90, fontsize=6, va='top', ha='right', color='tab:blue')
-    for t, module, label in tl.migrations:
-        ax_e.plot(t, 0.2, 'kv', markersize=5)
-        ax_e.text(t, 0.3, f'{module} {label}', rotation=90, fontsize=6, va='bottom', ha='left')
+        ax_e.text(t, 0.05, f' {label}', rotation=90, fontsize=7, va='bottom', ha='left', color='tab:blue')
+    for t, module, label in tl.migrations:    # which module and where to: the triangles on its lane above
+        ax_e.plot(t, 0.92, 'kv', markersize=5)
     ax_e.set_yticks([])
     ax_e.set_ylim(0, 1)
-    ax_e.set_title('decisions (blue) and migrations (triangles)', fontsize=9)
+    ax_e.set_title('network-aware decisions (blue lines) and migrations (triangles)', fontsize=9)
     if tl.hotspot is not None:
         for ax in axes:
             ax.axvline(tl.hotspot, color='magenta', linestyle='--', linewidth=1.2)
