@@ -11,7 +11,7 @@ import yaml
 
 from cnr_benchmarks.core import campaign
 from cnr_mission.core.task import (ABORTED, COMPLETED, GAVE_UP, OTHER, SUCCEEDED, TIMED_OUT, TOO_LONG,
-                                   append_result, battery_used, load_plan, load_task, mission_status, read_results,
+                                   append_result, battery_used, evaluable, load_plan, load_task, mission_status, read_results,
                                    resolve_force)
 from cnr_params import ConfigError, Section
 from network_monitor.core.advisor import FORCED, AdvisorError, Profile, TaskAdvisor
@@ -127,6 +127,12 @@ def test_the_shipped_task_and_status_rules():
     assert mission_status([TOO_LONG], 2) == TIMED_OUT
     assert mission_status([SUCCEEDED], 2) == ABORTED                        # stopped before the end
     assert battery_used(0.80, 0.795) == pytest.approx(0.005)      # BatteryState.percentage: 0..1
+    assert evaluable(battery_used(0.80, 0.795))
+
+
+def test_a_run_without_a_battery_reading_has_no_b_task_and_is_never_evaluated():
+    assert math.isnan(battery_used(None, 0.795)) and math.isnan(battery_used(0.8, None))
+    assert not evaluable(battery_used(None, None)) and not evaluable(math.nan)
     with pytest.raises(ConfigError, match='tasks.nope'):
         load_task(Section({'tasks': {}}, 'x.yaml'), 'nope')
 

@@ -26,8 +26,8 @@ from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
 from sensor_msgs.msg import BatteryState
 
 import cnr_params
-from cnr_mission.core.task import (GAVE_UP, SUCCEEDED, TOO_LONG, RunSpec, append_result, battery_used, load_plan,
-                                   load_task, mission_status, read_results, resolve_force)
+from cnr_mission.core.task import (GAVE_UP, SUCCEEDED, TOO_LONG, RunSpec, append_result, battery_used, evaluable,
+                                   load_plan, load_task, mission_status, read_results, resolve_force)
 from cnr_msgs.msg import TaskDecision
 from cnr_msgs.srv import Decide, EvaluateTask, Teleport
 from cnr_navigation.goal_sequencer import wait_for_server
@@ -187,10 +187,15 @@ class TaskRunner:
         t_task = rospy.Time.now().to_sec() - t0
         b1 = self.battery
         status = mission_status(outcomes, len(self.spec.goals))
-        b_task = battery_used(b0.percentage, b1.percentage) if b0 is not None and b1 is not None else math.nan
+        b_task = battery_used(None if b0 is None else b0.percentage, None if b1 is None else b1.percentage)
         row.update(mission_status=status, t_task=t_task, b_task=b_task, redecisions=len(self.redecisions))
-        if r.decide:
-            e = self.evaluate(MISSION_STATUS[status], t_task, b_task if math.isfinite(b_task) else 0.0, r.learn)
+        if r.decide and not evaluable(b_task):
+            # the decider's task is closed (it stops re-deciding) but nothing is labelled or learned from it
+            self.evaluate(MISSION_STATUS[status], t_task, 0.0, False)
+            self.say(f'{status}: T {t_task:.1f} s, no battery reading: the run is invalid (not evaluated, '
+                     f'not learned)')
+        elif r.decide:
+            e = self.evaluate(MISSION_STATUS[status], t_task, b_task, r.learn)
             self.say(f'evaluation: {e.message}')
             if e.ok:
                 # decision: what ran (a placement not made is evaluated as the one the task started with)

@@ -77,10 +77,18 @@ def mission_status(outcomes: Sequence[str], goals: int) -> str:
     return COMPLETED if len(outcomes) == goals else ABORTED
 
 
-def battery_used(percentage_before: float, percentage_after: float) -> float:
+def battery_used(percentage_before: Optional[float], percentage_after: Optional[float]) -> float:
     """B_task: the fraction of a full battery used, from two sensor_msgs/BatteryState ``percentage`` readings
-    (ROS: 0..1)."""
+    (ROS: 0..1); NaN when a reading is missing (no battery_state arrived) or not finite — such a run has no B_task
+    and must not be evaluated or learned (:func:`evaluable`)."""
+    if percentage_before is None or percentage_after is None:
+        return math.nan
     return percentage_before - percentage_after
+
+
+def evaluable(b_task: float) -> bool:
+    """Whether a run's B_task is a measurement (a run without one is invalid: never labelled, never learned)."""
+    return math.isfinite(b_task)
 
 
 # ---------------------------------------------------------------- plans
