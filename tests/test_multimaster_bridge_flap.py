@@ -159,7 +159,11 @@ def newest_served(robot, cloud) -> list:
     """What is wrong with SHARED: both masters must have it served by the cloud's provider (the newer one)."""
     wrong = []
     for side in (robot, cloud):
-        served = side.call('lookupService', SHARED)
+        try:
+            served = side.call('lookupService', SHARED)
+        except RuntimeError as exc:       # no provider: between a proxy's removal and the local one's return
+            wrong.append(f'{side.side} master: {exc}')
+            continue
         if not served.startswith(f'rosrpc://{cloud.address}:'):
             wrong.append(f"{side.side} master: {SHARED} served by {served}, not by the cloud's newer provider")
     return wrong
