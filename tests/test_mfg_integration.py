@@ -1,13 +1,12 @@
 """mfg with the global goal manager gone (as when it runs on the cloud and the link is down): the robot keeps
 patrolling with its own goals at once, and never waits on the missing service. Real master, real nodes."""
-import os
 import subprocess
 import threading
 
 import pytest
-import yaml
 
 from cnr_harness import wait_until
+from mfg_missions import patrol_only_mission
 
 rospy = pytest.importorskip('rospy')
 
@@ -15,17 +14,7 @@ rospy = pytest.importorskip('rospy')
 @pytest.fixture
 def mission(ros, workspace, tmp_path):
     """The corridor without heaters: mfg only patrols (no hotspot search, no end of the mission)."""
-    with open(os.path.join(workspace, 'config', 'scenarios', 'corridor.yaml')) as stream:
-        scenario = yaml.safe_load(stream)
-    scenario['temperature_field']['sources'] = []
-    scenario_file = str(tmp_path / 'patrol_only.yaml')
-    with open(scenario_file, 'w') as stream:
-        yaml.safe_dump(scenario, stream)
-    report = str(tmp_path / 'report')
-    proc = ros.master.run(['rosrun', 'cnr_bringup', 'cnr_launch', '--until', 'mission_monitor',
-                           'cnr_mission', 'mission.launch', 'monitor_required:=false', f'scenario_file:={scenario_file}',
-                           f'map:={workspace}/maps/corridor.yaml', 'real_time_factor:=4',
-                           f'report_dir:={report}', f'store:={report}/store.tsv'], log_name='mfg_fallback')
+    proc, _report = patrol_only_mission(ros, workspace, tmp_path, 'mfg_fallback', 'real_time_factor:=4')
     yield proc
     proc.stop()
 

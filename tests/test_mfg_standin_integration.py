@@ -9,9 +9,9 @@ import threading
 import time
 
 import pytest
-import yaml
 
 from cnr_harness import wait_until
+from mfg_missions import patrol_only_mission
 
 rospy = pytest.importorskip('rospy')
 
@@ -22,17 +22,8 @@ BOUND = 2.0                   # s: a robot left without a goal gets one within (
 @pytest.fixture
 def mission(ros, workspace, tmp_path):
     """The corridor without heaters (mfg only patrols), with the stand-in, in real time."""
-    with open(os.path.join(workspace, 'config', 'scenarios', 'corridor.yaml')) as stream:
-        scenario = yaml.safe_load(stream)
-    scenario['temperature_field']['sources'] = []
-    scenario_file = str(tmp_path / 'patrol_only.yaml')
-    with open(scenario_file, 'w') as stream:
-        yaml.safe_dump(scenario, stream)
-    report = str(tmp_path / 'report')
-    proc = ros.master.run(['rosrun', 'cnr_bringup', 'cnr_launch', '--until', 'mission_monitor',
-                           'cnr_mission', 'mission.launch', 'monitor_required:=false', f'scenario_file:={scenario_file}',
-                           f'map:={workspace}/maps/corridor.yaml', 'real_time_factor:=1', 'goal_standin:=true',
-                           f'report_dir:={report}', f'store:={report}/store.tsv'], log_name='mfg_standin')
+    proc, report = patrol_only_mission(ros, workspace, tmp_path, 'mfg_standin', 'real_time_factor:=1',
+                                       'goal_standin:=true')
     yield proc, report
     proc.stop()
 
