@@ -1,5 +1,7 @@
 """cnr_benchmarks.report's process handling without ROS: a long run started as a background job (SIGINT ignored
-by the shell) stops on SIGINT, and its child (a testbed session) is stopped with SIGTERM, so it can clean up."""
+by the shell) stops on SIGINT, and its child (a testbed session) is stopped with SIGTERM, so it can clean up; a
+resumable experiment runs only what is not finished."""
+import os
 import signal
 import subprocess
 import sys
@@ -58,3 +60,18 @@ def test_sigterm_stops_it_too_and_call_returns_the_exit_code(tmp_path):
     assert status == 3 and cleaned.exists()
     from cnr_benchmarks import report
     assert report.call([sys.executable, '-c', 'import sys; sys.exit(7)']) == 7
+
+
+def test_pending_runs_skip_the_finished_ones_and_finished_runs_load_them(tmp_path, capsys):
+    from cnr_benchmarks import report
+
+    def folder(key, i):
+        return str(tmp_path / f'{key}-{i}')
+    os.makedirs(folder('b', 1))
+    open(os.path.join(folder('b', 1), 'summary.json'), 'w').close()
+    todo = [(i, key, prefix) for i, key, _, prefix in report.pending_runs('x.sh', 2, ['a', 'b'], folder)]
+    assert todo == [(1, 'a', '[x.sh] [1/4]'), (2, 'a', '[x.sh] [3/4]'), (2, 'b', '[x.sh] [4/4]')]
+    assert 'b run 1: done before, kept' in capsys.readouterr().out
+    loaded = report.finished_runs(2, ['a', 'b'], folder,
+                                  lambda f, key, i: (key, i) if os.path.exists(os.path.join(f, 'summary.json')) else None)
+    assert loaded == [('b', 1)]

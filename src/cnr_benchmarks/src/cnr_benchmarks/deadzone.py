@@ -19,6 +19,7 @@ paper's plot). About 2 minutes per run.
 """
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 import time
@@ -70,23 +71,17 @@ def main(argv: Optional[List[str]] = None) -> int:
     scratch = results.scratch_dir(EXPERIMENT)
     if args.fresh:
         shutil.rmtree(os.path.join(scratch, 'runs'), ignore_errors=True)
-    total, done, t0 = len(args.modes) * args.runs, 0, time.monotonic()
-    for i in range(1, args.runs + 1):
-        for mode in args.modes:
-            folder = deadzone.run_folder(scratch, mode, i)
-            done += 1
-            if os.path.exists(os.path.join(folder, 'summary.json')):
-                report.progress(f'[{ap.prog}] [{done}/{total}] {mode} run {i}: done before, kept')
-                continue
-            report.progress(f'[{ap.prog}] [{done}/{total}] {mode} run {i} ({deadzone.MODES[mode][0]}), '
-                            f'{time.monotonic() - t0:.0f} s so far')
-            status = run_one(mode, folder)
-            if status in MISSION_ENDED:
-                report.progress(last_result_line(f'{folder}.log'))
-            else:
-                report.progress(f'[{ap.prog}] {mode} run {i} failed (status {status}; see {folder}.log)')
-    runs = [r for m in args.modes for i in range(1, args.runs + 1)
-            for r in [deadzone.load_run(deadzone.run_folder(scratch, m, i), m, i)] if r is not None]
+    t0 = time.monotonic()
+    for i, mode, folder, prefix in report.pending_runs(ap.prog, args.runs, args.modes,
+                                                       functools.partial(deadzone.run_folder, scratch)):
+        report.progress(f'{prefix} {mode} run {i} ({deadzone.MODES[mode][0]}), {time.monotonic() - t0:.0f} s so far')
+        status = run_one(mode, folder)
+        if status in MISSION_ENDED:
+            report.progress(last_result_line(f'{folder}.log'))
+        else:
+            report.progress(f'[{ap.prog}] {mode} run {i} failed (status {status}; see {folder}.log)')
+    runs = report.finished_runs(args.runs, args.modes, functools.partial(deadzone.run_folder, scratch),
+                                deadzone.load_run)
     print(deadzone.write_outputs(args.out, runs, cli.command(ap, argv)))
     report.progress(f'[{ap.prog}] done in {time.monotonic() - t0:.0f} s: {args.out}/README.md, deadzone.png, runs.tsv')
     return 0

@@ -19,6 +19,7 @@ docs/results/flap/README.md (or DIR) and runs.tsv. About 5 minutes per run.
 """
 from __future__ import annotations
 
+import functools
 import os
 import shutil
 import subprocess
@@ -173,28 +174,22 @@ def main(argv: Optional[List[str]] = None) -> int:
     brought_up = not tb.running()
     if brought_up:
         tb.up()
-    total, done, t0 = len(args.configs) * args.runs, 0, time.monotonic()
+    t0 = time.monotonic()
+    folder_of = functools.partial(core.run_folder, scratch)
     try:
-        for i in range(1, args.runs + 1):
+        for i, config, folder, prefix in report.pending_runs(ap.prog, args.runs, args.configs, folder_of):
             events = schedule(args.seed + i, args.outages)
-            for config in args.configs:
-                folder = core.run_folder(scratch, config, i)
-                done += 1
-                if os.path.exists(os.path.join(folder, 'summary.json')):
-                    report.progress(f'[{ap.prog}] [{done}/{total}] {config} run {i}: done before, kept')
-                    continue
-                report.progress(f'[{ap.prog}] [{done}/{total}] {config} run {i} ({len(events)} outages over '
-                                f'{events[-1].end:.0f} s), {time.monotonic() - t0:.0f} s so far')
-                status = run_one(tb, config, i, folder, events)
-                run = core.load_run(folder, config, i)
-                report.progress(f'[{ap.prog}] {config} run {i}: status {status}; ' +
-                                ('no report' if run is None else
-                                 ('goal line met' if not run.goal_failures() else '; '.join(run.goal_failures()))))
+            report.progress(f'{prefix} {config} run {i} ({len(events)} outages over {events[-1].end:.0f} s), '
+                            f'{time.monotonic() - t0:.0f} s so far')
+            status = run_one(tb, config, i, folder, events)
+            run = core.load_run(folder, config, i)
+            report.progress(f'[{ap.prog}] {config} run {i}: status {status}; ' +
+                            ('no report' if run is None else
+                             ('goal line met' if not run.goal_failures() else '; '.join(run.goal_failures()))))
     finally:
         if brought_up:
             tb.down()
-    runs = [r for c in args.configs for i in range(1, args.runs + 1)
-            for r in [core.load_run(core.run_folder(scratch, c, i), c, i)] if r is not None]
+    runs = report.finished_runs(args.runs, args.configs, folder_of, core.load_run)
     rows = [r.row() for r in runs]
     results.write_page(args.out, 'The split mission under a flapping link', 'thesis §4.2: unstable networks',
                        core.page_body(runs, args.outages, args.seed), cli.command(ap, argv),

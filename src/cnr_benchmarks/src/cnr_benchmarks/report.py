@@ -9,10 +9,12 @@ import subprocess
 import sys
 import tempfile
 import time
-from typing import IO, Callable, Dict, Iterable, List, NoReturn, Optional, Sequence
+from typing import IO, Callable, Dict, Iterable, Iterator, List, NoReturn, Optional, Sequence, Tuple, TypeVar
 
 from cnr_benchmarks.results import WS, results_dir, scratch_dir, tsv_cell
 from cnr_harness.script import EXIT_INTERRUPTED
+
+T = TypeVar('T')
 
 
 class TsvLog:
@@ -101,6 +103,28 @@ def call(argv: Sequence[str], output: Optional[IO] = None) -> int:
 
 def progress(msg: str) -> None:
     print(msg, flush=True)
+
+
+def pending_runs(prog: str, runs: int, keys: Sequence[str],
+                 folder: Callable[[str, int], str]) -> Iterator[Tuple[int, str, str, str]]:
+    """A resumable experiment's runs, run ``i`` of every key before run ``i + 1``: yields (i, key, folder,
+    progress prefix ``[prog] [n/total]``) for each run whose folder holds no ``summary.json`` yet, and says of the
+    others that they are kept."""
+    total, n = len(keys) * runs, 0
+    for i in range(1, runs + 1):
+        for key in keys:
+            n += 1
+            where = folder(key, i)
+            if os.path.exists(os.path.join(where, 'summary.json')):
+                progress(f'[{prog}] [{n}/{total}] {key} run {i}: done before, kept')
+                continue
+            yield i, key, where, f'[{prog}] [{n}/{total}]'
+
+
+def finished_runs(runs: int, keys: Sequence[str], folder: Callable[[str, int], str],
+                  load: Callable[[str, str, int], Optional[T]]) -> List[T]:
+    """Every finished run's ``load(folder, key, i)`` (None: unfinished, left out), key by key."""
+    return [r for key in keys for i in range(1, runs + 1) for r in [load(folder(key, i), key, i)] if r is not None]
 
 
 def group(rows: List[Dict], *keys: str) -> Dict[tuple, List[Dict]]:
