@@ -106,6 +106,8 @@ class ManagerNode:
         self._constructed.set()
         if not self.instance.managed:
             self.migration.on_active()
+        elif self.relay is not None:
+            rospy.loginfo('managed: standby until promoted (the relay\'s batches are left to the sender)')
         else:
             rospy.loginfo('managed: standby until promoted (merged measurements are buffered, '
                           f'at most {p.standby_buffer})')
@@ -144,7 +146,8 @@ class ManagerNode:
         if self.instance.managed and self.pub is None:     # active again after a freeze (rolled back)
             self.pub = self.instance.publisher('cell_states', CellStates, queue_size=1, latch=True)
         with self.lock:                                 # a promotion without a state: the own content's newest
-            since = None if self.ledger.storing else self.ledger.missing_since(self.ledger.newest_time)
+            since = None if self.ledger.storing or self.relay is not None else \
+                self.ledger.missing_since(self.ledger.newest_time)
         recovered = self._recover(since)
         self.migration.discard_prepared()               # (promoted without a state: not used)
         with self.instance.lock, self.lock:
