@@ -88,30 +88,31 @@ def play(tb: Testbed, events: List[Outage], watch) -> List[dict]:
     return played
 
 
-def finish_mission(tb: Testbed) -> None:
+def finish_mission(tb: Testbed, port: int) -> None:
     """Ask the robot's mission monitor to write its report and end (``~finish``)."""
-    env = dict(os.environ, ROS_MASTER_URI=f'http://{tb.robot_address}:11311', ROS_IP=tb.robot_address)
+    env = dict(os.environ, ROS_MASTER_URI=f'http://{tb.robot_address}:{port}', ROS_IP=tb.robot_address)
     tb.exec_in('robot', ['rosservice', 'call', '/mission_monitor/finish'], env=env, capture_output=True,
                timeout=30)
 
 
-def restore_watch(tb: Testbed, folder: str):
+def restore_watch(tb: Testbed, folder: str, port: int):
     """Both masters of the testbed, polled from their namespaces against the bridges' configurations the mission
     wrote (config/bridge.yaml overlaid by the host's allow-lists in ``<folder>/logs``)."""
     from multimaster_bridge.watch import RestoreWatch
     shared = os.path.join(results.WS, 'config', 'bridge.yaml')
-    return RestoreWatch(f'http://{tb.robot_address}:{MASTER_PORT}', f'http://{tb.cloud_address}:{MASTER_PORT}',
+    return RestoreWatch(f'http://{tb.robot_address}:{port}', f'http://{tb.cloud_address}:{port}',
                         [shared, os.path.join(folder, 'logs', 'bridge_robot.yaml')],
                         [shared, os.path.join(folder, 'logs', 'bridge_cloud.yaml')],
                         robot_netns=tb.namespace('robot'), cloud_netns=tb.namespace('cloud'))
 
 
-def run_one(tb: Testbed, config: str, index: int, folder: str, events: List[Outage]) -> int:
-    """One mission of ``config`` under ``events``; its exit status (a failed run leaves no summary.json)."""
+def run_one(tb: Testbed, config: str, folder: str, events: List[Outage], port: int = MASTER_PORT) -> int:
+    """One mission of ``config`` under ``events`` on the (running) testbed ``tb``, its masters on ``port``; its exit
+    status (a failed run leaves no summary.json)."""
     shutil.rmtree(folder, ignore_errors=True)
     os.makedirs(os.path.dirname(folder), exist_ok=True)
     argv = [RUN_MISSION, *core.mission_args(config), '--scenario', scenario_file(folder), '--delay', '0',
-            '--report-dir', folder]
+            '--port', str(port), '--report-dir', folder]
     log_path = f'{folder}.log'
     with open(log_path, 'w') as log:
         proc = subprocess.Popen(argv, stdout=log, stderr=subprocess.STDOUT)
@@ -121,12 +122,12 @@ def run_one(tb: Testbed, config: str, index: int, folder: str, events: List[Outa
         if not wait_for_line(log_path, STARTED, proc, START_LIMIT):
             report.progress(f'  the mission did not start (see {log_path})')
         else:
-            watch = restore_watch(tb, folder).start()
+            watch = restore_watch(tb, folder, port).start()
             played = play(tb, events, watch)
             time.sleep(5.0)                   # the last outage's restore
             watch.stop()
             if wait_for_line(log_path, FOUND, proc, END_LIMIT):
-                finish_mission(tb)
+                finish_mission(tb, port)
         status = proc.wait(timeout=END_LIMIT)
     except KeyboardInterrupt:
         proc.terminate()
@@ -181,7 +182,7 @@ def main(argv: Optional[List[str]] = None) -> int:
             events = schedule(args.seed + i, args.outages)
             report.progress(f'{prefix} {config} run {i} ({len(events)} outages over {events[-1].end:.0f} s), '
                             f'{time.monotonic() - t0:.0f} s so far')
-            status = run_one(tb, config, i, folder, events)
+            status = run_one(tb, config, folder, events)
             run = core.load_run(folder, config, i)
             report.progress(f'[{ap.prog}] {config} run {i}: status {status}; ' +
                             ('no report' if run is None else
