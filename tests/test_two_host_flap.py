@@ -22,7 +22,7 @@ pytestmark = [pytest.mark.skipif(os.geteuid() != 0, reason='needs root (network 
 
 def test_the_split_mission_with_migration_meets_the_goal_line_under_a_flapping_link(tmp_path):
     # short events and gaps so that six fit into the mission (39 s); with this seed every kind and direction
-    # occurs, and two cuts of both directions outlast the lease across the link (failovers)
+    # occurs, and two cuts (both ways; cloud -> robot) outlast the lease across the link (failovers)
     events = schedule(5, 6, FlapSettings(outage=(0.3, 6.0), gap=(2.0, 8.0)))
     assert {e.direction for e in events} >= {'up', 'down'} and {e.kind for e in events} == {'outage', 'loss'}
     tb = Testbed(os.path.join(WS, 'config', 'testbed.yaml'))
