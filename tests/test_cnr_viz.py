@@ -10,6 +10,7 @@ import pytest
 
 from cnr_maps.grid import MapcellGrid
 from cnr_params import ConfigError, Section
+from cnr_testbed.core.config import load_link_map
 from cnr_viz.core.scene import ColorScale, Scene, VizConfig, build, link_zones, module_line, stale_keys
 from cnr_viz.core.view import TopDownView, ViewConfig, fit, rviz_config
 
@@ -45,7 +46,6 @@ def test_colour_scale_marks_ambient_and_threshold(cfg):
 
 
 def test_link_zones_of_the_corridor_map_mark_the_dead_zone_between_the_ends(grid):
-    from cnr_testbed.core.config import load_link_map
     lm = load_link_map(os.path.join(CONFIG, 'link_map_corridor.yaml'))
     regions = [(r.name, r.x_min, r.x_max, r.y_min, r.y_max, r.conditions.outage) for r in lm.regions]
     zones = link_zones(regions, lm.default.outage, (grid.min_x, grid.min_y, grid.max_x, grid.max_y))
@@ -145,3 +145,15 @@ def test_the_timeline_is_drawn_from_a_report_folder(tmp_path):
     assert one.hosts == {'every module': [(0.0, 'robot', 0)]} and not one.rtt
     (tmp_path / 'nothing').mkdir()
     write_timeline(str(tmp_path / 'nothing'), json.loads(json.dumps(dict(sim_time_total=5.0))))
+
+
+def test_view_without_a_display_says_why_and_the_bag_topics_come_from_the_config(tmp_path):
+    from cnr_viz import viewer
+    assert viewer.display_problem('') == 'no display ($DISPLAY is not set)'
+    argv = viewer.record_argv(CONFIG, str(tmp_path))
+    assert argv[:5] == ['rosbag', 'record', '--quiet', '-O', str(tmp_path / 'mission.bag')]
+    assert {'/viz_markers/markers', '/merged_measurements', '/migration_manager/placement', '/migration_manager/events',
+            '/network_monitor/robot/network_profile', '/odom', '/tf', '/scan'} <= set(argv[5:])
+    path, view, cfg = viewer.write_rviz_config(CONFIG, os.path.join(CONFIG, 'scenarios', 'corridor.yaml'),
+                                               str(tmp_path))
+    assert os.path.dirname(path) == str(tmp_path) and (view.x, view.y) == (5.5, 0.0 + cfg.center_shift)
