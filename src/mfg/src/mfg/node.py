@@ -39,6 +39,7 @@ from migration_manager.instance import Hooks, ManagedInstance
 
 _TERMINAL = (GoalStatus.SUCCEEDED, GoalStatus.ABORTED, GoalStatus.REJECTED, GoalStatus.PREEMPTED, GoalStatus.RECALLED)
 _POLL = 0.02          # wall s between looks at the lease while the outputs are closed
+_RECALLS = 3          # a goal move_base refused before it started is sent again this often at most
 
 
 class MfgNode(Hooks):
@@ -222,12 +223,19 @@ class MfgNode(Hooks):
         # the timeout counts from this instance's send: a goal handed over (sent earlier by another instance)
         # gets its whole goal_timeout again, so a hand-over, however long it took, never cancels it at once
         deadline = max(goal.sent, rospy.Time.now().to_sec()) + self.p.goal_timeout
+        recalls = 0
         while self._live(epoch):
-            if self.client.wait_for_result(rospy.Duration(0.1)):
-                return self._outcome(goal)
-            # the server's status list says the goal ended, but its result never came: it was published while
+            # the server's status list may say the goal ended while its result never came: it was published while
             # the link was down (results are not latched; the status is repeated) - the goal is over all the same
-            if self.client.get_state() in _TERMINAL:
+            if self.client.wait_for_result(rospy.Duration(0.1)) or self.client.get_state() in _TERMINAL:
+                # refused before it started (RECALLED; mfg cancels only by returning): a goal sent while the
+                # link was down arrives stamped older than the goal move_base has meanwhile (the robot's
+                # stand-in's), and move_base keeps the newer one. The same goal again, stamped now
+                if self.client.get_state() == GoalStatus.RECALLED and recalls < _RECALLS and \
+                        self._output(epoch, send, wait=False):
+                    recalls += 1
+                    rospy.logwarn(f'move_base refused the goal to cell {goal.cell} before it started: sent again')
+                    continue
                 return self._outcome(goal)
             # move_base never listed the goal: it was lost on its way (actionlib sends a goal once; an outage
             # swallows it). The same goal again, as a new one
