@@ -293,3 +293,20 @@ def test_in_order_topics_is_a_required_list_of_globs():
             {k: v for k, v in base.items() if k != 'in_order_topics'}
         with pytest.raises(ConfigError, match=message):
             config.parse(Section(data, '/bridge'))
+
+
+def test_a_restore_is_timed_to_the_poll_from_which_the_invariant_held_until_the_next_outage():
+    from multimaster_bridge.watch import bridge_filters, restore_times
+    bad, ok = ['missing'], []
+    samples = [(10.0, bad), (10.1, ok), (10.2, bad), (10.3, ok), (10.4, ok),      # back at 10.0: held from 10.3 on
+               (11.0, bad), (12.0, ok),                                            # outage 2, back at 11.5
+               (13.0, bad), (13.5, bad)]                                           # outage 3, back at 13.2: never
+    r = restore_times(samples, began=[9.0, 10.9, 12.9], ended=[10.0, 11.5, 13.2])
+    assert [None if x is None else round(x, 3) for x in r.restores] == [0.3, 0.5, None]
+    assert r.unrestored == 1 and r.max == 0.5 and r.median == pytest.approx(0.4) and r.last_problems[2] == bad
+    name, filters = bridge_filters([{'name': '/robot', 'allow_topics': ['/a/*'], 'deny_topics': ['/a/x']},
+                                    {'allow_services': '/s'}])
+    assert name == 'robot' and filters.passes('pub', '/a/b') and not filters.passes('sub', '/a/x')
+    assert filters.passes('srv', '/s') and not filters.passes('srv', '/a/b')
+    with pytest.raises(ValueError, match='name: missing'):
+        bridge_filters({'allow_topics': ['*']})

@@ -230,6 +230,7 @@ def test_every_outage_is_followed_by_a_full_restore_and_connections_come_back(fl
         tb.set(event.direction, outage=False, loss=0.0)
         back = time.monotonic()
         watch.outage_ended(back)
+        print(f'{event.describe()}: link back at {time.time():.3f} (wall clock, as in the bridges\' logs)')
         gap = events[i + 1].start - event.end if i + 1 < len(events) else 30.0
         if gap < SETTLE:
             continue

@@ -89,20 +89,24 @@ class MasterReader:
         return {n: uri for n, (code, _, uri) in zip(nodes, answers) if code == 1}
 
 
-def check(a: Tuple[str, MasterReader, Filters], b: Tuple[str, MasterReader, Filters]) -> List[str]:
+def check(a: Tuple[str, MasterReader, Filters], b: Tuple[str, MasterReader, Filters],
+          known: Optional[Dict[str, Dict[str, str]]] = None) -> List[str]:
     """The invariant's violations between two live masters (``(bridge name, reader, filters)`` each); the URIs are
-    looked up only once the registrations match."""
+    looked up only once the registrations match, and only those not in ``known`` (bridge name -> node -> URI,
+    filled here: a caller that keeps it between checks clears it now and then)."""
     sides = [Side(name, MasterView.from_system_state(reader.system_state()), filters) for name, reader, filters in (a, b)]
     wrong = violations(*sides)
     if wrong:
         return wrong
+    known = {} if known is None else known
     readers = {a[0]: a[1], b[0]: b[1]}
     for here, there in ((sides[0], sides[1]), (sides[1], sides[0])):
         mine = proxy_nodes(here, there.name)
-        prefix_len = len(there.name) + 2
-        theirs = sorted({'/' + n[prefix_len:] for n in mine})
-        here.view.uris.update(readers[here.name].node_uris(sorted(mine)))
-        there.view.uris.update(readers[there.name].node_uris(theirs))
+        theirs = {'/' + n[len(there.name) + 2:] for n in mine}
+        for side, names in ((here, mine), (there, theirs)):
+            cache = known.setdefault(side.name, {})
+            cache.update(readers[side.name].node_uris(sorted(n for n in names if n not in cache)))
+            side.view.uris.update({n: cache[n] for n in names if n in cache})
     return violations(*sides)
 
 
@@ -137,7 +141,8 @@ class RestoreWatch:
         robot_master_uri, cloud_master_uri: the masters' URIs.
         robot_bridge_cfg, cloud_bridge_cfg: each bridge's configuration (see :func:`bridge_filters`).
         robot_netns, cloud_netns: network namespaces to reach the masters from (the testbed's), or None.
-        interval: seconds between polls (the resolution of the restore times).
+        interval: seconds between polls (the resolution of the restore times). Each poll is one getSystemState per
+            master (and lookupNode for nodes new to the watch, and for all of them once a second).
     """
 
     def __init__(self, robot_master_uri: str, cloud_master_uri: str, robot_bridge_cfg: BridgeCfg,
@@ -148,6 +153,9 @@ class RestoreWatch:
         self.sides = ((robot_name, MasterReader(robot_master_uri, robot_netns), robot_filters),
                       (cloud_name, MasterReader(cloud_master_uri, cloud_netns), cloud_filters))
         self.interval = interval
+        self.uri_refresh = 1.0           # s between fresh lookups of every node's URI
+        self._known: Dict[str, Dict[str, str]] = {}
+        self._known_at = -float('inf')
         self._lock = threading.Lock()
         self._samples: List[Tuple[float, List[str]]] = []     # (time after the poll, violations)
         self._began: List[float] = []
@@ -159,8 +167,10 @@ class RestoreWatch:
     def check_now(self) -> List[str]:
         """One check of the invariant (what is wrong; empty: it holds). A master that does not answer is a
         violation."""
+        if time.monotonic() - self._known_at > self.uri_refresh:
+            self._known, self._known_at = {}, time.monotonic()
         try:
-            return check(*self.sides)
+            return check(*self.sides, known=self._known)
         except (OSError, RuntimeError, xmlrpc.client.Error) as exc:
             self.errors += 1
             return [f'a master did not answer: {exc}']
@@ -213,15 +223,19 @@ class RestoreWatch:
     def results(self) -> RestoreResults:
         """Per outage ended: the restore time within its window (up to the next outage's begin or now)."""
         with self._lock:
-            samples = list(self._samples)
-            began, ended = sorted(self._began), list(self._ended)
-        out = RestoreResults()
-        for t in ended:
-            window_end = min((b for b in began if b >= t), default=float('inf'))
-            window = [s for s in samples if t <= s[0] < window_end]
-            out.restores.append(_restore(window, t))
-            out.last_problems.append(next((w for _, w in reversed(window) if w), []))
-        return out
+            return restore_times(list(self._samples), list(self._began), list(self._ended))
+
+
+def restore_times(samples: List[Tuple[float, List[str]]], began: List[float], ended: List[float]) -> RestoreResults:
+    """Per link return in ``ended``: seconds until the invariant held for good within its window, which lasts until
+    the next outage in ``began`` (or the last sample). ``samples``: (time, violations) in time order."""
+    out = RestoreResults()
+    for t in ended:
+        window_end = min((b for b in began if b >= t), default=float('inf'))
+        window = [s for s in samples if t <= s[0] < window_end]
+        out.restores.append(_restore(window, t))
+        out.last_problems.append(next((w for _, w in reversed(window) if w), []))
+    return out
 
 
 def _restore(window: List[Tuple[float, List[str]]], t: float) -> Optional[float]:
@@ -236,4 +250,4 @@ def _restore(window: List[Tuple[float, List[str]]], t: float) -> Optional[float]
     return max(0.0, window[first][0] - t)
 
 
-__all__ = ['MasterReader', 'RestoreResults', 'RestoreWatch', 'bridge_filters', 'check']
+__all__ = ['MasterReader', 'RestoreResults', 'RestoreWatch', 'bridge_filters', 'check', 'restore_times']
