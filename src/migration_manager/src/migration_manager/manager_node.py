@@ -368,6 +368,11 @@ class Manager:
             return []
         if verb == 'retire':
             cold = detail == 'cold' or m.module not in self.cfg.hot_standby
+            if m.failover and not cold:
+                # the source is cut off: it steps down by itself once it hears the newer term, and its agent starts
+                # it again as a standby, which is what a hot module keeps there; calls to it now would only hold
+                # the module "migrating" until they time out
+                return []
             if cold and host in self.cfg.dormant.get(m.module, ()):
                 ok, res = self.control[(m.module, host)].call(command='sleep')
                 if ok and res.ok:
