@@ -27,6 +27,12 @@ re-decides as the link changes and evaluates the mission at its end (default pla
 config/link_map_corridor.yaml). The report adds the placement, link.tsv (conditions and bytes over time), the
 bytes over the link and, network-aware, decisions.tsv.
 
+Watching: --view opens rviz (config/mission.rviz with cnr_viz's markers: mapcells by temperature, the search,
+the goals, the hotspot, the link map's dead zones, where each module runs) beside the mission when $DISPLAY is
+set, on two hosts attached to the robot's master, and saves its last view as view.png in the report; --record
+writes the mission's rosbag, mission.bag, into the report. Every report has timeline.png (each module's host,
+the link's RTT and outages, measurements per second, decisions and migrations).
+
 Exit status: 0 hotspot found, 3 not found, 2 bad configuration, 130 interrupted, 1 anything else.
 """
 from __future__ import annotations
