@@ -157,3 +157,15 @@ def test_view_without_a_display_says_why_and_the_bag_topics_come_from_the_config
     path, view, cfg = viewer.write_rviz_config(CONFIG, os.path.join(CONFIG, 'scenarios', 'corridor.yaml'),
                                                str(tmp_path))
     assert os.path.dirname(path) == str(tmp_path) and (view.x, view.y) == (5.5, 0.0 + cfg.center_shift)
+
+
+def test_the_timeline_is_redrawn_with_a_fixed_placements_hosts(tmp_path):
+    from cnr_mission.core.timeline import TIMELINE, from_report, redraw_timeline
+    summary = dict(scenario='corridor', placement='paper_normal', sim_time_total=5.0,
+                   two_host=dict(hosts={'mfg': 'cloud', 'move_base': 'robot'}))
+    assert from_report(str(tmp_path), summary).hosts == {'mfg': [(0.0, 'cloud', 0)], 'move_base': [(0.0, 'robot', 0)]}
+    redraw_timeline(str(tmp_path))                     # no summary: nothing drawn
+    assert not (tmp_path / TIMELINE).exists()
+    (tmp_path / 'summary.json').write_text(json.dumps(summary))
+    redraw_timeline(str(tmp_path))
+    assert (tmp_path / TIMELINE).stat().st_size > 10000

@@ -55,6 +55,7 @@ from cnr_bringup.placement import Placement, launch_args, load_catalog, describe
 from cnr_harness import Proc, WaitTimeout, wait_until
 from cnr_harness.script import require_root
 from cnr_mission.core.report import write_summary
+from cnr_mission.core.timeline import redraw_timeline
 from cnr_mission.options import EXIT_NOT_FOUND, add_link_arguments, add_migration_arguments
 from cnr_params.config import EXIT_CONFIG, ConfigError, Section, load_yaml
 from cnr_testbed import cpucap
@@ -595,4 +596,5 @@ def run(args: TwoHostOptions) -> int:
                           link_set=dict(link, trace=args.trace, link_map=args.link_map),
                           wall_time_total=time.monotonic() - wall0, robot_cpu=mission.cpu,
                           **mission.link_report())))
+        redraw_timeline(args.report_dir)     # with the placement's hosts (a fixed placement has no placement.tsv)
     return status

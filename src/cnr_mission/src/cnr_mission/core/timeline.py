@@ -6,11 +6,13 @@ the robot's network_monitor, ``alive`` false = no answer from the cloud; the emu
 drawn: its clock starts when the two-host launches are up, not with the mission), the measurements per second
 (``measurements.tsv``), and the network-aware decisions (``decisions.tsv``) and migrations (the summary's
 ``migrations``) as events; the hotspot's time is marked on every panel. Reads the report folder and the summary
-(a dict: the mission monitor passes the one it is about to write).
+(a dict: the mission monitor passes the one it is about to write; the two-host mission draws it again once it
+added each module's host to ``summary.json``).
 """
 from __future__ import annotations
 
 import csv
+import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -151,3 +153,14 @@ def write_timeline(report_dir: str, summary: Dict) -> str:
     path = os.path.join(report_dir, TIMELINE)
     render(path, from_report(report_dir, summary))
     return path
+
+
+def redraw_timeline(report_dir: str) -> None:
+    """The timeline again from the report's ``summary.json`` (the two-host mission adds each module's host to it
+    after the monitor wrote the report); nothing without a summary."""
+    try:
+        with open(os.path.join(report_dir, 'summary.json')) as f:
+            summary = json.load(f)
+    except (OSError, ValueError):
+        return
+    write_timeline(report_dir, summary)
