@@ -169,3 +169,16 @@ def test_the_timeline_is_redrawn_with_a_fixed_placements_hosts(tmp_path):
     (tmp_path / 'summary.json').write_text(json.dumps(summary))
     redraw_timeline(str(tmp_path))
     assert (tmp_path / TIMELINE).stat().st_size > 10000
+
+
+def test_a_bad_viz_config_is_named_before_anything_starts(tmp_path):
+    import shutil
+    import yaml
+    from cnr_viz.viewer import check_config
+    check_config(CONFIG)
+    shutil.copy(os.path.join(CONFIG, 'viz.yaml'), tmp_path / 'viz.yaml')
+    data = yaml.safe_load((tmp_path / 'viz.yaml').read_text())
+    data['viz']['record']['topics'] = ['scan']
+    (tmp_path / 'viz.yaml').write_text(yaml.safe_dump(data))
+    with pytest.raises(ConfigError, match=r'viz.yaml: viz.record.topics: expected a list of topic names'):
+        check_config(str(tmp_path))

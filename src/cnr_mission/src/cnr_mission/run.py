@@ -49,7 +49,7 @@ from cnr_bringup.launcher import EXIT_INTERRUPTED, NOISE
 from cnr_harness.script import WS, Interrupted, Parser, Processes, ScriptError, log, master_address, master_up, \
     port_number, run, setup_workspace
 from cnr_mission.options import DEFAULT_TASK, EXIT_NOT_FOUND, add_link_arguments, add_migration_arguments
-from cnr_params.config import EXIT_CONFIG
+from cnr_params.config import EXIT_CONFIG, ConfigError
 
 PROG = 'run_mission.sh'
 DEFAULT_PLACEMENT = 'move_base_cloud'
@@ -224,6 +224,15 @@ def start_viewer(procs: Processes, scenario: str, report: str, view: bool, recor
     return rviz, display, view_cfg
 
 
+def check_viewer() -> None:
+    """config/viz.yaml before anything starts (--view, --record): a problem is one line naming file and field."""
+    from cnr_viz.viewer import check_config
+    try:
+        check_config(os.path.join(WS, 'config'))
+    except ConfigError as exc:
+        raise ScriptError(str(exc)) from None
+
+
 def view_display(view: bool) -> str:
     """The display rviz opens on with ``--view`` ('' with one line why not, or without ``--view``)."""
     if not view:
@@ -280,6 +289,8 @@ def mission(argv: Optional[List[str]]) -> int:
     scenario = scenario_file(args.scenario)
     setup_workspace()
     name, map_file, start = check_scenario(scenario)
+    if args.view or args.record:
+        check_viewer()
     report = report_folder(args.report_dir, name)
     runner = run_two_host if args.two_host else run_single_master
     return outcome(runner(args, scenario, name, map_file, start, report), report)

@@ -25,6 +25,16 @@ BAG = 'mission.bag'
 PANEL = 'rviz_panel.json'
 
 
+def check_config(config_dir: str) -> None:
+    """``config/viz.yaml`` as a whole (the node's settings, the view, the bag's topics), before anything starts:
+    a ConfigError naming file and field."""
+    from cnr_viz.core.scene import VizConfig
+    sec = Section.from_file(os.path.join(config_dir, 'viz.yaml'))
+    VizConfig.from_section(sec)
+    ViewConfig.from_section(sec)
+    record_topics(config_dir)
+
+
 def display_problem(display: str) -> str:
     """'' when rviz can open a window on ``display``, else why not (one line)."""
     if not display:
