@@ -32,7 +32,7 @@ class Hosts:
         from cnr_testbed.rosside import start_bridge
         procs = [start_bridge(self.robot, self.cloud, self.secret, **settings),
                  start_bridge(self.cloud, self.robot, self.secret, **settings)]
-        wait_until(lambda: 'peer cloud is up' in log(procs[0]) and 'peer robot is up' in log(procs[1]), 30,
+        wait_until(lambda: 'peer cloud is up' in log(procs[0]) and 'peer robot is up' in log(procs[1]), 60,
                    'the bridges to see each other')
         return procs
 
