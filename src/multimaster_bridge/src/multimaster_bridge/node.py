@@ -423,8 +423,9 @@ class Bridge:
                 kept = sync.kept_spellings(arriving, self.master.node_apis(sorted(arriving)))
                 for cid, api in kept.items():
                     rospy.logwarn(f'bridge: {peer.peer.name}: the master still holds {cid} at {api} (a service '
-                                  f'of it that a local provider took over): registering it there, not under the '
-                                  f'other spelling (that would shut the real node down)')
+                                  f'of it that a local provider took over, or a registration the bridge no longer '
+                                  f'counts as its own): registering it there, not under the other spelling (that '
+                                  f'would shut the real node down)')
                 if kept:
                     peer.kept_spelling.update(kept)
                     desired = sync.respell(desired, peer.kept_spelling)
