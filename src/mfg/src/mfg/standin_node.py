@@ -106,20 +106,23 @@ class GoalStandin:
             if index is None:
                 return
             c = self.grid.cell(index)
-            path = self.core.path
-            if not self.core.standing_in:
+            goal = move_base_goal(c.center_x, c.center_y, facing_away(self.pose, c.center_x, c.center_y),
+                                  self.p.frame_id)
+            goal.target_pose.header.stamp = rospy.Time.now()
+            # sent before anything else (logging included): the less time between the decision and the goal, the
+            # less chance that a goal of the source sent meanwhile is preempted by this one
+            self.client.send_goal(goal)
+            self.sent_wall = time.monotonic()
+            first = not self.core.standing_in
+            self.core.sent()
+            self.goals_sent += 1
+            if first:
+                path = self.core.path
                 heard = 'never' if path.last_heartbeat is None else f'{now - path.last_heartbeat:.1f} s ago'
                 rospy.logwarn(f'goal_standin: no goal for {now - path.standing_since(now):.1f} s and the goal source '
                               f'(mode {path.mode or "unknown"}, last heard {heard}) does not hold the robot: '
                               f'driving its own {LocalGoals.name} goals until the source gives one again')
                 self.standing_pub.publish(Bool(True))
-            goal = move_base_goal(c.center_x, c.center_y, facing_away(self.pose, c.center_x, c.center_y),
-                                  self.p.frame_id)
-            goal.target_pose.header.stamp = rospy.Time.now()
-            self.client.send_goal(goal)
-            self.sent_wall = time.monotonic()
-            self.core.sent()
-            self.goals_sent += 1
             rospy.loginfo(f'goal_standin: goal {self.goals_sent}: cell {index} (col {c.col}, row {c.row}) at '
                           f'({c.center_x:.1f}, {c.center_y:.1f})')
 
