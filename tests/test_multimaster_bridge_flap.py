@@ -176,6 +176,7 @@ def newest_served(robot, cloud) -> list:
 def flapping(tmp_path_factory, workspace):
     from bridge_testbed import two_hosts
     from cnr_harness import wait_until
+    from cnr_testbed.netns import inside
     from multimaster_bridge.watch import RestoreWatch
     with two_hosts(workspace, NAME, str(tmp_path_factory.mktemp('flap')), cloud_sim_time=True) as hosts:
         robot, cloud = hosts.robot, hosts.cloud   # the cloud runs on the robot's /clock
@@ -188,7 +189,7 @@ def flapping(tmp_path_factory, workspace):
         nodes.append(cloud.run([sys.executable, me, 'cloud', 'robot'], 'node_cloud'))
         watch = RestoreWatch(robot.master_uri, cloud.master_uri, hosts.bridge_config('robot', **SETTINGS),
                              hosts.bridge_config('cloud', **SETTINGS), robot_netns=robot.namespace,
-                             cloud_netns=cloud.namespace, interval=0.02).start()
+                             cloud_netns=cloud.namespace, enter=inside, interval=0.02).start()
         try:
             wait_until(lambda: watch.holds() and not newest_served(robot, cloud) and served_again(nodes, [{}, {}]),
                        60, 'the registrations across and both nodes served across before the first outage')

@@ -7,13 +7,14 @@ return to the moment from which the invariant held until the next outage::
 
     watch = RestoreWatch(robot_uri, cloud_uri, ['config/bridge.yaml', 'config/bridge_robot.yaml'],
                          ['config/bridge.yaml', 'config/bridge_cloud.yaml'],
-                         robot_netns='robot', cloud_netns='cloud').start()
+                         robot_netns='robot', cloud_netns='cloud', enter=cnr_testbed.netns.inside).start()
     watch.outage_began(); ...; watch.outage_ended()      # times: time.monotonic() unless given
     ...
     summary = watch.stop().results()                     # RestoreResults: .restores, .median, .max, .unrestored
 
-A master inside a network namespace (the testbed's) is reached from inside it (``*_netns``: the name under
-/var/run/netns; root). Times are ``time.monotonic()``.
+A master inside a network namespace (the testbed's) is reached from inside it: ``*_netns`` names the namespace and
+``enter`` is the context manager that runs the calling thread inside one (``cnr_testbed.netns.inside``; root).
+Times are ``time.monotonic()``.
 """
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ import threading
 import time
 import xmlrpc.client
 from dataclasses import dataclass, field
-from typing import Any, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, ContextManager, Dict, Iterator, List, Mapping, Optional, Sequence, Tuple, Union
 
 import yaml
 
@@ -31,6 +32,7 @@ from multimaster_bridge.core.invariant import Filters, MasterView, Side, proxy_n
 from multimaster_bridge.core.sync import Filter
 
 BridgeCfg = Union[str, Mapping[str, Any], Sequence[Union[str, Mapping[str, Any]]]]
+Enter = Callable[[str], ContextManager[None]]     # namespace name -> runs the calling thread inside it
 
 
 def bridge_filters(cfg: BridgeCfg) -> Tuple[str, Filters]:
@@ -55,20 +57,24 @@ def bridge_filters(cfg: BridgeCfg) -> Tuple[str, Filters]:
 
 
 class MasterReader:
-    """Master API calls to one master, from inside ``netns`` if given."""
+    """Master API calls to one master, from inside network namespace ``netns`` (entered by ``enter``) if given."""
 
-    def __init__(self, uri: str, netns: Optional[str] = None, caller_id: str = '/restore_watch') -> None:
+    def __init__(self, uri: str, netns: Optional[str] = None, enter: Optional[Enter] = None,
+                 caller_id: str = '/restore_watch') -> None:
+        if netns is not None and enter is None:
+            raise ValueError(f'enter: needed to reach the master {uri} inside the namespace {netns!r} '
+                             f'(e.g. cnr_testbed.netns.inside)')
         self.uri = uri
         self.netns = netns
+        self.enter = enter
         self.caller_id = caller_id
 
     @contextlib.contextmanager
     def _place(self) -> Iterator[None]:
-        if self.netns is None:
+        if self.netns is None or self.enter is None:
             yield
             return
-        from cnr_testbed import netns   # the testbed's namespaces: only when asked for
-        with netns.inside(self.netns):
+        with self.enter(self.netns):
             yield
 
     def system_state(self) -> Tuple[list, list, list]:
@@ -141,17 +147,19 @@ class RestoreWatch:
         robot_master_uri, cloud_master_uri: the masters' URIs.
         robot_bridge_cfg, cloud_bridge_cfg: each bridge's configuration (see :func:`bridge_filters`).
         robot_netns, cloud_netns: network namespaces to reach the masters from (the testbed's), or None.
+        enter: runs the calling thread inside a named namespace (``cnr_testbed.netns.inside``); needed with a
+            namespace.
         interval: seconds between polls (the resolution of the restore times). Each poll is one getSystemState per
             master (and lookupNode for nodes new to the watch, and for all of them once a second).
     """
 
     def __init__(self, robot_master_uri: str, cloud_master_uri: str, robot_bridge_cfg: BridgeCfg,
                  cloud_bridge_cfg: BridgeCfg, robot_netns: Optional[str] = None, cloud_netns: Optional[str] = None,
-                 interval: float = 0.05) -> None:
+                 enter: Optional[Enter] = None, interval: float = 0.05) -> None:
         robot_name, robot_filters = bridge_filters(robot_bridge_cfg)
         cloud_name, cloud_filters = bridge_filters(cloud_bridge_cfg)
-        self.sides = ((robot_name, MasterReader(robot_master_uri, robot_netns), robot_filters),
-                      (cloud_name, MasterReader(cloud_master_uri, cloud_netns), cloud_filters))
+        self.sides = ((robot_name, MasterReader(robot_master_uri, robot_netns, enter), robot_filters),
+                      (cloud_name, MasterReader(cloud_master_uri, cloud_netns, enter), cloud_filters))
         self.interval = interval
         self.uri_refresh = 1.0           # s between fresh lookups of every node's URI
         self._known: Dict[str, Dict[str, str]] = {}
