@@ -121,3 +121,17 @@ def test_standstill_keeps_the_longest_interval_and_its_start():
     assert st.intervals == 2 and st.total == pytest.approx(1.5 + 2.0) and st.open
     st.sample(6.1, None, 0.0)
     assert not st.open and st.total == pytest.approx(3.5)
+
+
+def test_a_source_that_ends_its_search_gets_the_timeout_from_then_and_a_live_one_stops_the_chain(params):
+    s = Standin(params, own)
+    s.path.source_mode(0.0, 'SEARCH')
+    t = feed(s, 0.0, 1.0, [('/mfg-1-0.0', ACTIVE)])
+    t = feed(s, t, 8.0, [('/mfg-1-0.0', SUCCEEDED)])          # measuring
+    s.path.source_mode(t, 'PATROL')                           # done: its next goal is due within the timeout
+    assert s.path.standing_since(t) == pytest.approx(8.0) and not s.due(t + params.timeout - 0.1)
+    assert s.due(t + params.timeout)
+    s.sent()
+    t = feed(s, t, t + 3.0, [('/goal_standin-1-9.5', ACTIVE)])
+    t = feed(s, t, t + 0.4, [('/goal_standin-1-9.5', SUCCEEDED)])
+    assert s.path.alive(t) and not s.due(t)                   # a live source: no chain, the timeout again
