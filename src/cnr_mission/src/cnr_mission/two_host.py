@@ -11,7 +11,8 @@ What runs where:
 * **robot namespace, outside the CPU cap** (the physical world and the observer): the simulator with its
   battery and map_server, the mission monitor (``world.launch``), the link-map follower or trace player;
 * **robot namespace, inside the robot's CPU cgroup** (the robot's computer): the robot's rosmaster, its
-  bridge, network_monitor, kestrel_driver and the modules the placement puts on the robot (``host.launch``);
+  bridge, network_monitor, kestrel_driver and the modules the placement puts on the robot (``host.launch``), and
+  goal_standin (mfg package) when mfg is on the cloud or movable: the robot's own patrol goals while mfg gives none;
 * **cloud namespace**: the cloud's rosmaster, bridge, network_monitor and the modules placed on the cloud (with
   a map_server of its own when move_base runs there).
 
