@@ -181,10 +181,18 @@ class Ledger:
         return self.c.book.measurements(cell)
 
     # ------------------------------------------------------------------ the stream
-    def receive(self, r: Reading) -> Tuple[str, Optional[Measurement]]:
+    def receive_many(self, rs: Sequence[Reading]) -> List[Tuple[str, Optional[Measurement]]]:
+        """Readings that arrive together (a relay's batch), stored with one write and one fsync; the outcome
+        of each as :meth:`receive`'s."""
+        outcomes = [self.receive(r, write=False) for r in rs]
+        self.store.append_many([m for _, m in outcomes if m is not None])
+        return outcomes
+
+    def receive(self, r: Reading, write: bool = True) -> Tuple[str, Optional[Measurement]]:
         """A reading arrives: kept in the buffer and/or stored, depending on the mode. Returns
         ('buffered', None) when it is only buffered, else the outcome of storing it (STORED with the
-        measurement, DUPLICATE, OUTSIDE)."""
+        measurement, DUPLICATE, OUTSIDE). ``write`` False: the caller appends the stored measurement to the
+        store file itself."""
         if self.keeping:
             if len(self.buffer) == self.buffer.maxlen:
                 if self.buffer_dropped == 0:
@@ -199,7 +207,7 @@ class Ledger:
             self.c.duplicates += 1
         elif outcome == OUTSIDE:
             self.c.outside += 1
-        else:
+        elif write:
             self.store.append(m)
         return outcome, m
 

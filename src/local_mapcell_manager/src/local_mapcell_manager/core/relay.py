@@ -5,7 +5,7 @@ With ``~relay_stream`` set, local_mapcell_manager takes its merged measurements 
 acknowledges them itself, after its own durable write: :func:`take_batch` stores the new records of a batch
 through the :class:`Ledger` (its duplicate rule, each row fsync'ed), then persists the relay's delivered mark (a
 :class:`cnr_store_forward.core.receiver.Receiver` whose state file lies next to the store, :func:`mark_path`),
-and only then may the node acknowledge. The mark is part of the instance's state (key ``relay``, :func:`state_mark`),
+and only then may the node acknowledge (a batch's new rows: one write, one fsync). The mark is part of the instance's state (key ``relay``, :func:`state_mark`),
 so a promoted instance acknowledges from the mark that matches the store it took over, and the sender sends
 everything after it again: what the instance before it acknowledged but did not hand over (a failover from a
 replica older than its last ack) comes again, what it handed over comes again only as duplicates.
@@ -67,20 +67,17 @@ def take_batch(receiver: Receiver, ledger: Ledger, epoch: int, floor: int,
     plan = receiver.plan(epoch, floor, [seq for seq, _ in records])
     if before is not None and receiver.delivered > before:
         out.skipped = receiver.delivered - before
-    last = 0
-    for seq, reading in records[plan.start:]:
-        if reading is None:
-            out.undecodable += 1
-        else:
-            outcome, m = ledger.receive(reading)
-            if m is not None:
-                out.stored.append(m)
-            elif outcome == DUPLICATE:
-                out.duplicates += 1
-            elif outcome == OUTSIDE:
-                out.outside += 1
-        last = seq
-    if last:
-        receiver.commit(last)
+    new = records[plan.start:]
+    readings = [r for _, r in new if r is not None]
+    out.undecodable = len(new) - len(readings)
+    for outcome, m in ledger.receive_many(readings):        # one write and one fsync for the batch
+        if m is not None:
+            out.stored.append(m)
+        elif outcome == DUPLICATE:
+            out.duplicates += 1
+        elif outcome == OUTSIDE:
+            out.outside += 1
+    if new:
+        receiver.commit(new[-1][0])
     out.ack = plan.ack
     return out
