@@ -442,6 +442,7 @@ def test_the_shipped_config_is_valid_for_both_roles():
     (lambda d: d['sender'].update(batch_records=500), 'sender.batch_records: must be <= window'),
     (lambda d: d['sender'].update(max_backoff=0.5), 'sender.max_backoff: must be >= ack_timeout'),
     (lambda d: d['sender'].update(fsync='yes'), 'sender.fsync: expected true or false'),
+    (lambda d: d['sender'].pop('retain_records'), 'sender.retain_records: missing'),
 ])
 def test_a_bad_parameter_is_named(edit, message):
     from cnr_params import load_yaml

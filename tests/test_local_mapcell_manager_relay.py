@@ -190,3 +190,26 @@ def test_the_mark_is_durable_with_the_store_and_never_ahead_of_it(tmp_path):
     again.promote(None)
     assert again.take(q.epoch, q.floor, q.records(4, 7, 100, 1 << 20)) == (q.epoch, 7)
     assert times(again) == [round(reading(i).time, 6) for i in range(1, 8)]
+
+
+@pytest.mark.parametrize('edit,message', [
+    (lambda d: d.pop('relay_stream'), 'relay_stream: missing'),
+    (lambda d: d.pop('relay'), 'relay: missing'),
+    (lambda d: d['relay']['receiver'].pop('ack_period'), 'relay.receiver.ack_period: missing'),
+    (lambda d: d.update(relay_stream='a/b'), 'stream: must be a ROS name'),
+])
+def test_the_relay_parameters_are_read_and_a_bad_one_is_named(edit, message):
+    """What modules.launch loads: config/local_mapcell_manager.yaml, and config/store_forward.yaml in ~relay."""
+    import os
+    from cnr_params import ConfigError, Section, load_yaml
+    from local_mapcell_manager.core.params import read_relay
+    ws = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    data = dict(load_yaml(os.path.join(ws, 'config', 'local_mapcell_manager.yaml')),
+                relay=load_yaml(os.path.join(ws, 'config', 'store_forward.yaml')))
+    assert read_relay(Section(data, 'test')) is None                      # the shipped default: direct input
+    data['relay_stream'] = 'merged_measurements'
+    r = read_relay(Section(data, 'test'))
+    assert r.common.topic('data') == 'store_forward/merged_measurements/data' and r.ack_period > 0
+    edit(data)
+    with pytest.raises(ConfigError, match=message):
+        read_relay(Section(data, 'test'))
