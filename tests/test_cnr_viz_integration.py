@@ -1,7 +1,8 @@
 """The mission in rviz, for real: ``run_mission.sh --view --record`` on a short single-master corridor mission
 under Xvfb (Debian's rviz with Mesa's software GL). The report holds rviz's last view (``view.png``: the hotspot's
 colour where the hotspot cell lands in rviz's render panel, the mapcells' temperature colours around it), the
-timeline and ``mission.bag``; ``rosbag play`` of the bag publishes the same markers again, hotspot included.
+timeline and ``mission.bag``; ``rosbag play`` of the bag publishes the same markers again, hotspot included, and
+drives rviz to the same view.
 
 Skipped, saying why, when rviz, Xvfb or python3-xlib is missing (``launch_scripts/setup.sh`` installs them)."""
 from __future__ import annotations
@@ -14,7 +15,7 @@ import subprocess
 
 import pytest
 
-from cnr_harness import free_port, stop_process, wait_until
+from cnr_harness import RosMaster, free_port, stop_process, wait_until
 
 WS = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 MISSING = [what for what, ok in (('rviz', shutil.which('rviz')), ('Xvfb', shutil.which('Xvfb')),
@@ -22,6 +23,7 @@ MISSING = [what for what, ok in (('rviz', shutil.which('rviz')), ('Xvfb', shutil
 pytestmark = pytest.mark.skipif(bool(MISSING), reason=f'{", ".join(MISSING)} missing (Debian packages rviz, xvfb, '
                                                       'python3-xlib: launch_scripts/setup.sh installs them)')
 HOTSPOT = (200, 80, 200)      # magenta: red and blue above, green below (config/viz.yaml colors.hotspot)
+TITLE = ' - RViz'             # in rviz's main window's title (config/viz.yaml view.window_title)
 
 
 @pytest.fixture(scope='module')
@@ -60,7 +62,7 @@ def test_the_view_shows_mapcells_hotspot_and_placement(viewed_mission, workspace
     import numpy as np
     status, output, report = viewed_mission
     assert status == 0, output[-3000:]
-    assert '--view: rviz on' in output and 'view.png' in output
+    assert '--view: rviz on' in output and 'the last view saved as' in output, output[-3000:]
     with open(os.path.join(report, 'summary.json')) as f:
         summary = json.load(f)
     img = np.asarray(Image.open(os.path.join(report, 'view.png')).convert('RGB')).astype(int)
@@ -91,25 +93,39 @@ def test_the_view_shows_mapcells_hotspot_and_placement(viewed_mission, workspace
     assert os.path.getsize(os.path.join(report, 'timeline.png')) > 10000
 
 
-def test_the_recorded_bag_replays_the_markers(viewed_mission, ros):
-    import rospy
-    from visualization_msgs.msg import MarkerArray
+def _hotspot_pixels(path: str) -> int:
+    from PIL import Image
+    import numpy as np
+    img = np.asarray(Image.open(path).convert('RGB')).astype(int)
+    return int(((img[..., 0] > HOTSPOT[0]) & (img[..., 1] < HOTSPOT[1]) & (img[..., 2] > HOTSPOT[2])).sum())
+
+
+def test_the_recorded_bag_replays_into_the_same_view(viewed_mission, xvfb, tmp_path):
+    """The bag holds the mission's topics and the markers (the hotspot's among them); rviz with the report's config
+    on a fresh master of its own, then ``rosbag play --clock`` of the bag: rviz shows the hotspot again."""
+    import rosbag
+    from cnr_viz.screenshot import grab, window_present
     status, output, report = viewed_mission
     assert status == 0, output[-3000:]
-    bag = os.path.join(report, 'mission.bag')
-    info = subprocess.run(['rosbag', 'info', '--yaml', '--key=topics', bag], stdout=subprocess.PIPE, text=True,
-                          check=True).stdout
-    for topic in ('/viz_markers/markers', '/merged_measurements', '/odom', '/tf', '/scan', '/hotspot'):
-        assert f'topic: {topic}' in info, f'{topic} not recorded'
-    seen = []
-    sub = rospy.Subscriber('/viz_markers/markers', MarkerArray,
-                           lambda m: seen.append({(mk.ns, mk.text) for mk in m.markers}), queue_size=50)
-    play = ros.master.run(['rosbag', 'play', '--clock', '-r', '20', '--topics', '/viz_markers/markers', '--bags', bag],
-                          'rosbag_play')
+    path = os.path.join(report, 'mission.bag')
+    with rosbag.Bag(path) as bag:
+        topics = set(bag.get_type_and_topic_info().topics)
+        namespaces = {mk.ns for _, msg, _ in bag.read_messages(topics=['/viz_markers/markers']) for mk in msg.markers}
+        lines = {mk.text for _, msg, _ in bag.read_messages(topics=['/viz_markers/markers']) for mk in msg.markers
+                 if mk.ns == 'placement'}
+    assert {'/viz_markers/markers', '/merged_measurements', '/odom', '/tf', '/scan', '/hotspot', '/map',
+            '/cell_states', '/battery_state'} <= topics
+    assert {'mapcells', 'scale', 'hotspot', 'placement', 'robot'} <= namespaces
+    assert 'mfg: robot' in lines
+    master = RosMaster(log_dir=os.path.join(WS, 'build', 'test_logs'), use_sim_time=True, caller='/test_cnr_viz')
     try:
-        wait_until(lambda: any(ns == 'hotspot' for s in seen for ns, _ in s), 120, 'the hotspot marker from the bag')
+        rviz = master.run(['rviz', '-d', os.path.join(report, 'logs', 'mission.rviz')], 'rviz_replay',
+                          env={'DISPLAY': xvfb})
+        # rviz shows its window once its displays are created (and subscribed)
+        wait_until(lambda: window_present(xvfb, TITLE), 180, "rviz's window", rviz)
+        master.run(['rosbag', 'play', '--clock', '-r', '10', path], 'rosbag_play')
+        shot = str(tmp_path / 'replay.png')
+        wait_until(lambda: grab(xvfb, TITLE, shot)[2] and _hotspot_pixels(shot) > 50, 180,
+                   'the hotspot in the replayed view', rviz, interval=0.5)
     finally:
-        sub.unregister()
-        ros.master.stop_child(play)
-    assert any(ns == 'mapcells' for s in seen for ns, _ in s)
-    assert any(ns == 'placement' and text.startswith('mfg: robot') for s in seen for ns, text in s)
+        master.stop()

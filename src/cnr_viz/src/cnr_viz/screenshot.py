@@ -1,8 +1,8 @@
 """A window of an X display as a PNG (python3-xlib and Pillow; no ROS).
 
-``grab(display, title_part, path)`` finds the top-level window whose name contains ``title_part`` (rviz names
-its window after the config file: ``mission.rviz - RViz``) and writes what it shows; with no such window, the
-whole screen. ``render_panel`` finds where rviz draws the 3-D view in that window (OGRE's own X window: the
+``grab(display, title_part, path)`` finds the viewable window whose name contains ``title_part`` (rviz names its
+main window after the config file: ``mission.rviz - RViz``, ``mission.rviz* - RViz`` once changed) and writes
+what it shows; with no such window, the whole screen. ``render_panel`` finds where rviz draws the 3-D view in that window (OGRE's own X window: the
 deepest child covering a large part of it), for checking where a map point landed.
 """
 from __future__ import annotations
@@ -11,13 +11,16 @@ from typing import Optional, Tuple
 
 
 def _find(win, title_part: str):
+    """The first viewable window under ``win`` whose name contains ``title_part``, or None."""
+    from Xlib import X
     try:
         name = win.get_wm_name()
+        viewable = win.get_attributes().map_state == X.IsViewable
     except Exception:        # a window that went away meanwhile (Xlib raises its own error classes)
-        name = None
+        name, viewable = None, False
     if isinstance(name, bytes):
         name = name.decode(errors='replace')
-    if name and title_part in name:
+    if name and title_part in name and viewable:
         return win
     try:
         children = win.query_tree().children
@@ -37,14 +40,20 @@ def grab(display: str, title_part: str, path: str) -> Tuple[int, int, bool]:
 
     d = xdisplay.Display(display)
     try:
-        root = d.screen().root
+        screen = d.screen()
+        root = screen.root
         win = _find(root, title_part) if title_part else None
-        target = win if win is not None else root
-        geo = target.get_geometry()
-        raw = target.get_image(0, 0, geo.width, geo.height, X.ZPixmap, 0xFFFFFFFF)
-        img = Image.frombytes('RGB', (geo.width, geo.height), raw.data, 'raw', 'BGRX')
+        x, y, w, h = 0, 0, screen.width_in_pixels, screen.height_in_pixels
+        if win is not None:          # the window's rectangle of the screen (what is visible of it)
+            geo = win.get_geometry()
+            pos = root.translate_coords(win, 0, 0)
+            x0, y0 = max(pos.x, 0), max(pos.y, 0)
+            w, h = min(pos.x + geo.width, w) - x0, min(pos.y + geo.height, h) - y0
+            x, y = x0, y0
+        raw = root.get_image(x, y, w, h, X.ZPixmap, 0xFFFFFFFF)
+        img = Image.frombytes('RGB', (w, h), raw.data, 'raw', 'BGRX')
         img.save(path)
-        return geo.width, geo.height, win is not None
+        return w, h, win is not None
     finally:
         d.close()
 
