@@ -310,3 +310,18 @@ def test_a_restore_is_timed_to_the_poll_from_which_the_invariant_held_until_the_
     assert filters.passes('srv', '/s') and not filters.passes('srv', '/a/b')
     with pytest.raises(ValueError, match='name: missing'):
         bridge_filters({'allow_topics': ['*']})
+
+
+def test_a_kept_state_ages_with_the_time_since_it_arrived():
+    """The peer's provider was 2 s old when its state was sent and the local one is 5 s old now: 4 s after the
+    state arrived the peer's is 6 s old, older than the local one, which therefore serves (newest wins)."""
+    state = remote_state(srvs={'/s': ['/p', 'rosrpc://c:1', 2.0]},
+                         nodes=dict(remote_state()['nodes'], **{'/p': 'http://10.77.0.2:4003/'}))
+    local = snapshot(services={'/s': '/mine'}, service_apis={'/s': 'rosrpc://r:1'})
+
+    def remote_serves(st):
+        return any(r.kind == 'srv' for r in sync.plan('cloud', st, local, set(), ALL, ALL, {'/s': 5.0}, {}).registrations)
+    assert remote_serves(state)                               # as sent: the peer's is newer
+    assert not remote_serves(sync.aged_state(state, 4.0))     # as it is now: the local one is newer
+    assert sync.aged_state(state, 4.0)['srvs'] == {'/s': ['/p', 'rosrpc://c:1', 6.0]}
+    assert state['srvs']['/s'][2] == 2.0 and sync.aged_state(state, 0.0) is state

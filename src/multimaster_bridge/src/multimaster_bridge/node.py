@@ -34,6 +34,7 @@ class PeerState:
         self.estimator = LinkEstimator(cfg.heartbeat_rate, cfg.loss_timeout)
         self.alive = False
         self.state: Optional[dict] = None
+        self.state_at = 0.0                         # when ``state`` arrived (monotonic)
         self.state_digest = ''
         self.announced_digest = ''
         self.generation = 0
@@ -318,6 +319,7 @@ class Bridge:
         elif kind == 'state':
             if peer.alive:
                 peer.state = msg['state']
+                peer.state_at = now
                 peer.state_digest = msg['digest']
                 self.wake.set()
         elif kind == 'req':
@@ -406,7 +408,8 @@ class Bridge:
             if self.snapshot_stale:
                 break   # another peer's changes first show in the next poll
             with self.lock:
-                state = peer.state if peer.alive else None
+                state = sync.aged_state(peer.state, time.monotonic() - peer.state_at) \
+                    if peer.alive and peer.state is not None else None
                 generation = peer.generation
             if state is None:
                 desired: Set[sync.Registration] = set()

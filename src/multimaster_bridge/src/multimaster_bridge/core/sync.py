@@ -153,6 +153,17 @@ def service_ages(first_seen: Dict[ServiceKey, float], listed: Dict[str, Tuple[st
     return kept, {s: now - kept[(s,) + p] for s, p in listed.items()}
 
 
+def aged_state(state: dict, elapsed: float) -> dict:
+    """A peer's ``state`` as of ``elapsed`` seconds after it was sent: its services' providers that much older.
+
+    A peer sends its state again only when its digest changes, and the digest leaves the ages out (they change at
+    every poll), so a state kept for a minute says its providers are a minute younger than they are: compared with a
+    local provider's current age, the older provider would win (the two bridges would take turns hiding theirs)."""
+    if elapsed <= 0 or not state.get('srvs'):
+        return state
+    return dict(state, srvs={s: [node, api, age + elapsed] for s, (node, api, age) in state['srvs'].items()})
+
+
 def rejoined_without_our_loss(view_before: Optional[bool], view_now: bool, since_our_return: float,
                               loss_timeout: float) -> bool:
     """Whether a peer's heartbeat says it lost us and hears us again while we did not lose it: an outage in one
