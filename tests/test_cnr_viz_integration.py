@@ -50,7 +50,7 @@ def viewed_mission(xvfb, tmp_path_factory):
     env = dict(os.environ, DISPLAY=xvfb, ROS_MASTER_URI=f'http://127.0.0.1:{free_port()}')
     out = subprocess.run([os.path.join(WS, 'launch_scripts', 'run_mission.sh'), '--single-master', '--view',
                           '--record', '--rtf', '10', '--report-dir', report], env=env, stdout=subprocess.PIPE,
-                         stderr=subprocess.STDOUT, text=True, timeout=600)
+                         stderr=subprocess.STDOUT, text=True, timeout=540)     # within the test timeout
     return out.returncode, out.stdout, report
 
 
