@@ -129,7 +129,8 @@ def test_the_timeline_is_drawn_from_a_report_folder(tmp_path):
                                                   '1\t1\t0.004\t0\t0\t1\t1\t1\n2\t0\tnan\tnan\tnan\t1\t1\t1\n'
                                                   '5\t1\t0.005\t0\t0\t1\t1\t1\n')
     (tmp_path / 'measurements.tsv').write_text('measurement\ttime\tx\ty\ttemperature\tcell\trow\tcol\tpose_time\n'
-                                               '1\t100.5\t0\t0\t22\t0\t0\t0\t100.5\n2\t101.2\t0\t0\t22\t0\t0\t0\t101.2\n')
+                                               '1\t100.5\t0\t0\t22\t0\t0\t0\t100.5\n'
+                                               '2\t101.2\t0\t0\t22\t0\t0\t0\t101.2\n')
     (tmp_path / 'decisions.tsv').write_text('time\tevent\tdecision\n0.5\tdecided\toffload\n')
     summary = dict(scenario='corridor', placement='all_robot', sim_time_start=100.0, sim_time_total=20.0,
                    sim_time_to_find=15.0, migrations=[dict(time=10.0, module='mfg', source='robot', target='cloud',

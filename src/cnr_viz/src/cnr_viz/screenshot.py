@@ -2,8 +2,9 @@
 
 ``grab(display, title_part, path)`` finds the viewable window whose name contains ``title_part`` (rviz names its
 main window after the config file: ``mission.rviz - RViz``, ``mission.rviz* - RViz`` once changed) and writes
-what it shows; with no such window, the whole screen. ``render_panel`` finds where rviz draws the 3-D view in that window (OGRE's own X window: the
-deepest child covering a large part of it), for checking where a map point landed.
+what it shows; with no such window, the whole screen. ``render_panel`` finds where rviz draws the 3-D view in
+that window (OGRE's own X window: the deepest child covering a large part of it), for checking where a map point
+landed.
 """
 from __future__ import annotations
 

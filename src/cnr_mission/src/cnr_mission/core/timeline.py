@@ -111,8 +111,10 @@ def render(path: str, tl: Timeline) -> None:
     ax_h.set_yticklabels(modules, fontsize=8)
     ax_h.set_ylim(-0.6, len(modules) - 0.4)
     ax_h.invert_yaxis()
-    ax_h.legend(handles=[Patch(color=c, label=h if h != '-' else 'none (migrating)') for h, c in HOST_COLORS.items()]
-                + ([plt.Line2D([], [], color='k', marker='v', linestyle='', label='migration')] if tl.migrations else []),
+    handles = [Patch(color=c, label=h if h != '-' else 'none (migrating)') for h, c in HOST_COLORS.items()]
+    if tl.migrations:
+        handles.append(plt.Line2D([], [], color='k', marker='v', linestyle='', label='migration'))
+    ax_h.legend(handles=handles,
                 loc='lower right', bbox_to_anchor=(1.0, 1.0), fontsize=7, ncol=4, frameon=False)
     ax_h.set_title(f'{tl.title}: where each module ran', fontsize=10, loc='left')
     for a, b in tl.down:

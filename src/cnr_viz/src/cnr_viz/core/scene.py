@@ -213,8 +213,8 @@ def module_line(module: str, host: str, term: int, link: Optional[Tuple[bool, fl
     line = f'{module}: {where}' + (f' (term {term})' if term else '')
     if link is not None:
         alive, rtt, r_bw = link
-        line += (f'  RTT {_fmt_rtt(rtt)}  R_bw {r_bw:.3g}' if math.isfinite(r_bw) else f'  RTT {_fmt_rtt(rtt)}  R_bw ?') \
-            if alive else '  link DOWN'
+        r = f'{r_bw:.3g}' if math.isfinite(r_bw) else '?'
+        line += f'  RTT {_fmt_rtt(rtt)}  R_bw {r}' if alive else '  link DOWN'
     return line
 
 
