@@ -21,8 +21,6 @@ Point = Tuple[float, float, float]
 COLOR_NAMES = ('unvisited', 'cool', 'ambient', 'hot', 'hotspot', 'investigation', 'checked', 'global_goal',
                'mfg_goal', 'link_up', 'dead_zone', 'robot', 'text')
 TOPIC_NAMES = ('cell_states', 'measurements', 'search_state', 'hotspot', 'global_goal', 'pose', 'placement')
-# marker types by the name visualization_msgs/Marker gives their constant
-TYPES = ('ARROW', 'CUBE', 'SPHERE', 'CYLINDER', 'LINE_STRIP', 'LINE_LIST', 'CUBE_LIST', 'TEXT_VIEW_FACING')
 
 
 @dataclass(frozen=True)
