@@ -100,7 +100,7 @@ def test_module_line_when_the_link_is_down_and_without_a_link():
 
 
 def test_the_view_fits_the_grid_and_projects_points(grid):
-    cfg = ViewConfig((900.0, 600.0), (1.0, 3.0), 0.5, 'RViz', 60.0)
+    cfg = ViewConfig((900.0, 600.0), (1.0, 3.0), 0.5, 'RViz', 60.0, 3)
     v = fit(grid, cfg)
     assert (v.x, v.y) == (5.5, 0.5) and math.isclose(v.scale, min(900 / 13, 600 / 8))
     col, row = v.project(5.5, 0.5, cfg.panel)

@@ -104,9 +104,13 @@ def test_the_recorded_bag_replays_into_the_same_view(viewed_mission, xvfb, tmp_p
     """The bag holds the mission's topics and the markers (the hotspot's among them); rviz with the report's config
     on a fresh master of its own, then ``rosbag play --clock`` of the bag: rviz shows the hotspot again."""
     import rosbag
+    from cnr_params import Section
+    from cnr_viz.core.view import ViewConfig
     from cnr_viz.screenshot import grab, window_present
+    from cnr_viz.viewer import open_rviz
     status, output, report = viewed_mission
     assert status == 0, output[-3000:]
+    view = ViewConfig.from_section(Section.from_file(os.path.join(WS, 'config', 'viz.yaml')))
     path = os.path.join(report, 'mission.bag')
     with rosbag.Bag(path) as bag:
         topics = set(bag.get_type_and_topic_info().topics)
@@ -119,9 +123,10 @@ def test_the_recorded_bag_replays_into_the_same_view(viewed_mission, xvfb, tmp_p
     assert 'mfg: robot' in lines
     master = RosMaster(log_dir=os.path.join(WS, 'build', 'test_logs'), use_sim_time=True, caller='/test_cnr_viz')
     try:
-        rviz = master.run(['rviz', '-d', os.path.join(report, 'logs', 'mission.rviz')], 'rviz_replay',
-                          env={'DISPLAY': xvfb})
-        # rviz shows its window once its displays are created (and subscribed)
+        # rviz shows its window once its displays are created (and subscribed); started again if it crashes first
+        rviz = open_rviz(lambda: master.run(['rviz', '-d', os.path.join(report, 'logs', 'mission.rviz')],
+                                            'rviz_replay', env={'DISPLAY': xvfb}), xvfb, view)
+        assert rviz is not None, 'rviz ended before its window showed, every time'
         wait_until(lambda: window_present(xvfb, TITLE), 180, "rviz's window", rviz)
         master.run(['rosbag', 'play', '--clock', '-r', '10', path], 'rosbag_play')
         shot = str(tmp_path / 'replay.png')

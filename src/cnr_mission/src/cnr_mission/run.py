@@ -219,8 +219,14 @@ def start_viewer(procs: Processes, scenario: str, report: str, view: bool, recor
         return None
     os.makedirs(logs, exist_ok=True)
     rviz_cfg, _, view_cfg = viewer.write_rviz_config(config_dir, scenario, logs)
-    with open(os.path.join(logs, 'rviz.log'), 'w') as out:
-        rviz = procs.start(viewer.rviz_argv(rviz_cfg), stdout=out, stderr=subprocess.STDOUT)
+
+    def start() -> subprocess.Popen:
+        with open(os.path.join(logs, 'rviz.log'), 'a') as out:
+            return procs.start(viewer.rviz_argv(rviz_cfg), stdout=out, stderr=subprocess.STDOUT)
+    rviz = viewer.open_rviz(start, display, view_cfg)       # its window up before the mission starts
+    if rviz is None:
+        log(PROG, f'--view: rviz ended {view_cfg.rviz_attempts} times before its window showed (logs/rviz.log)')
+        return None
     return rviz, display, view_cfg
 
 

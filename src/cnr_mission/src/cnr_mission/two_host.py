@@ -220,6 +220,7 @@ class TwoHostMission:
         x, y, a = self.start
         # every launch reads its nodes' configuration from the same directory as this process (--config-dir)
         common = [f'scenario_file:={self.scenario_file}', f'map:={self.map_file}', f'config_dir:={self.config}']
+        self.start_viewer()
         self._launch(self.robot, 'world', ['cnr_mission', 'world.launch', *common, f'x:={x}', f'y:={y}', f'a:={a}',
                                            'real_time_factor:=1', f'report_dir:={self.report_dir}',
                                            f'placement:={self.placement.name}',
@@ -233,7 +234,6 @@ class TwoHostMission:
                                            *([f'decider:={DECIDER}', f'decision_task:={self.network_aware}']
                                              if self.network_aware else []), *self.viz_args()],
                      until='task_runner' if self.task else 'mission_monitor')
-        self.start_viewer()
         for side, peer in ((self.robot, self.cloud), (self.cloud, self.robot)):
             store = f'store_{side.side}.tsv' if self.migration else 'store.tsv'
             host_args = ['cnr_mission', 'host.launch', f'host:={side.side}', *common,
@@ -339,9 +339,15 @@ class TwoHostMission:
         from cnr_viz import viewer
         if self.record:
             self.procs['record'] = self.robot.run(viewer.record_argv(self.config, self.report_dir), 'record')
-        if self.view_display:
+        if self.view_display:        # its window up before the mission starts
             path, _, self.view_cfg = viewer.write_rviz_config(self.config, self.scenario_file, self.log_dir)
-            self.procs['rviz'] = self.robot.run(viewer.rviz_argv(path), 'rviz', env={'DISPLAY': self.view_display})
+            rviz = viewer.open_rviz(lambda: self.robot.run(viewer.rviz_argv(path), 'rviz',
+                                                           env={'DISPLAY': self.view_display}),
+                                    self.view_display, self.view_cfg)
+            if rviz is None:
+                print(f'[two-host] rviz ended {self.view_cfg.rviz_attempts} times before its window showed', flush=True)
+            else:
+                self.procs['rviz'] = rviz
 
     def save_view(self) -> None:
         """rviz's last view as view.png in the report (it keeps the markers after the mission's nodes stopped)."""

@@ -13,7 +13,7 @@ from __future__ import annotations
 import json
 import os
 import shutil
-from typing import List, Tuple
+from typing import Any, Callable, List, Optional, Tuple
 
 from cnr_maps.grid import MapcellGrid
 from cnr_params import Section
@@ -62,6 +62,24 @@ def write_rviz_config(config_dir: str, scenario_file: str, out_dir: str) -> Tupl
 
 def rviz_argv(config: str) -> List[str]:
     return ['rviz', '-d', config]
+
+
+def open_rviz(start: Callable[[], Any], display: str, view: ViewConfig) -> Optional[Any]:
+    """``start()`` rviz (returns its process: anything with ``poll()``) and wait until its window shows; started
+    again when it ends first (Mesa's software GL sometimes crashes rviz as it starts), ``view.rviz_attempts`` times
+    in all. The process, or None when no attempt showed a window."""
+    from cnr_harness import WaitTimeout, wait_until
+    from cnr_viz.screenshot import window_present
+    for _ in range(view.rviz_attempts):
+        proc = start()
+        try:
+            wait_until(lambda: proc.poll() is not None or window_present(display, view.window_title),
+                       view.window_timeout, "rviz's window", interval=0.2)
+        except WaitTimeout:
+            return proc               # still starting: the screenshot waits for it again
+        if proc.poll() is None:
+            return proc
+    return None
 
 
 def record_topics(config_dir: str) -> List[str]:

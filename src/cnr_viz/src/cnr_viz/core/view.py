@@ -19,6 +19,7 @@ class ViewConfig:
     center_shift: float                # m
     window_title: str
     window_timeout: float              # s (wall)
+    rviz_attempts: int
 
     @classmethod
     def from_section(cls, p: Section) -> 'ViewConfig':
@@ -30,7 +31,7 @@ class ViewConfig:
         if min(margin) < 0:
             raise v.error('margin', f'expected two margins >= 0 m, got {margin}')
         return cls(tuple(panel), tuple(margin), v.number('center_shift'), v.string('window_title'),
-                   v.number('window_timeout', positive=True))
+                   v.number('window_timeout', positive=True), v.integer('rviz_attempts', minimum=1))
 
 
 @dataclass(frozen=True)
