@@ -328,21 +328,22 @@ def write_markdown(out: str, args: argparse.Namespace, results: List[Dict], fail
     header = list(Group.HEADER)
     probe = read_probe(probe_file) if os.path.exists(probe_file) else []
     periods = {m: output_period(probe, m) for m in args.modules}
-    lines = [f'Started {started}.', '',
-             'Downtime: the old instance closed its outputs (its frozen status\'s stamp) -> the first output of the '
-             'new one arrives at the consumer on the robot (migration_probe; one clock for both hosts on the '
-             'testbed). Consumer gap: last output of the old instance to the first of the new one, measured on the '
-             'robot; it holds the module\'s own output period too. Manager: freeze answered -> the target active '
-             '(its promotion answered, or its first lease granted). ms; median / p95 / max over both directions. '
-             '"gaps" = migrations whose gap could be told (move_base: not when its goal ended during the '
-             'hand-over). Without any migration a consumer already sees the output period between two outputs: '
-             + ', '.join(f'{m} {1000 * p:.0f} ms' for m, p in periods.items() if p == p) + '.', '',
-             report.markdown_table(['RTT ms', 'module', 'mode', *header],
-                                   [g.row() for g in group_results(results, ('rtt_ms', 'module', 'mode'))]),
-             '', 'By direction:', '',
-             report.markdown_table(['RTT ms', 'module', 'mode', 'direction', *header],
-                                   [g.row() for g in group_results(results, ('rtt_ms', 'module', 'mode',
-                                                                              'direction'))])]
+    lines = [f'Started {started}.']
+    if results:
+        lines += ['', 'Downtime: the old instance closed its outputs (its frozen status\'s stamp) -> the first '
+                 'output of the new one arrives at the consumer on the robot (migration_probe; one clock for both '
+                 'hosts on the testbed). Consumer gap: last output of the old instance to the first of the new one, measured on the '
+                 'robot; it holds the module\'s own output period too. Manager: freeze answered -> the target active '
+                 '(its promotion answered, or its first lease granted). ms; median / p95 / max over both directions. '
+                 '"gaps" = migrations whose gap could be told (move_base: not when its goal ended during the '
+                 'hand-over). Without any migration a consumer already sees the output period between two outputs: '
+                 + ', '.join(f'{m} {1000 * p:.0f} ms' for m, p in periods.items() if p == p) + '.', '',
+                 report.markdown_table(['RTT ms', 'module', 'mode', *header],
+                                       [g.row() for g in group_results(results, ('rtt_ms', 'module', 'mode'))]),
+                 '', 'By direction:', '',
+                 report.markdown_table(['RTT ms', 'module', 'mode', 'direction', *header],
+                                       [g.row() for g in group_results(results, ('rtt_ms', 'module', 'mode',
+                                                                                  'direction'))])]
     if failovers:
         def column(v: List[Dict], key: str) -> List[float]:
             return [float(x[key]) for x in v if x.get(key)]
@@ -351,7 +352,8 @@ def write_markdown(out: str, args: argparse.Namespace, results: List[Dict], fail
                   '= what ran on the robot before the cut (cold: nothing, the instance is started then).', '',
                   report.markdown_table(['RTT ms', 'module', 'standby', 'trials', 'active p50', 'active max',
                                          'promoted p50', 'output p50', 'output max'], [
-                      [*k, len(v), percentile(column(v, 'active_after'), 50), max(column(v, 'active_after') or [math.nan]),
+                      [*k, len(v), percentile(column(v, 'active_after'), 50),
+                       max(column(v, 'active_after') or [math.nan]),
                        percentile(column(v, 'promoted_after'), 50), percentile(column(v, 'output_after'), 50),
                        max(column(v, 'output_after') or [math.nan])]
                       for k, v in sorted(report.group(failovers, 'rtt_ms', 'module', 'standby').items())])]

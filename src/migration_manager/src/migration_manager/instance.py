@@ -200,6 +200,7 @@ class ManagedInstance:
         self._follow_replicas(True)
         rospy.Service(topic(module, f'{self.host}/control'), InstanceControl, self._on_control)
         threading.Thread(target=self._loop, name='migration-instance', daemon=True).start()
+        threading.Thread(target=self._renew_loop, name='migration-renew', daemon=True).start()
 
     # ------------------------------------------------------------------ for the node
     @property
@@ -399,10 +400,29 @@ class ManagedInstance:
                 rospy.logdebug(f'{self.id}: no bridge poll ({name}): {exc}')
         threading.Thread(target=call, name='bridge-nudge', daemon=True).start()
 
+    def _renew_loop(self) -> None:
+        """Renewal requests every ``renew_period`` (a promoted instance's and a standby's), in a thread of their
+        own: a replica being encoded or a status being published in :meth:`_loop` never delays one."""
+        self.elevator.this_thread()
+        next_renew = time.monotonic()
+        while not rospy.core.is_shutdown_requested():
+            now = time.monotonic()
+            with self.lock:
+                asking = not self.frozen and not self.holder.superseded and not (self.dormant and not self.holder.term)
+            if asking and now >= next_renew:
+                next_renew = now + self.renew_period
+                try:
+                    self._renew()
+                except rospy.ROSException:
+                    if rospy.core.is_shutdown_requested():
+                        return
+                    raise
+            time.sleep(max(0.001, min(next_renew - time.monotonic(), self.renew_period / 4)))
+
     def _loop(self) -> None:
         cfg = self.cfg
         self.elevator.this_thread()
-        next_renew = next_state = next_status = time.monotonic()
+        next_state = next_status = time.monotonic()
         last_role = ''
         while not rospy.core.is_shutdown_requested():
             now = time.monotonic()
@@ -413,9 +433,6 @@ class ManagedInstance:
                 superseded = self.holder.superseded and not self.frozen
                 role = self._role()
             try:
-                if (promoted or standby) and now >= next_renew:
-                    next_renew = now + self.renew_period
-                    self._renew()
                 self._transitions()
                 if superseded:
                     self.frozen = True
