@@ -10,6 +10,7 @@ from __future__ import annotations
 import math
 import os
 import threading
+import time
 from typing import Callable, List, Optional
 
 import rospy
@@ -133,6 +134,14 @@ class ManagerNode:
                           f'received are missing')
         return [r for r in map(self._reading, res.measurements) if r is not None]
 
+    def _await_input(self, timeout: float) -> None:
+        """Wait (at most ``timeout`` wall s) until ``merged_measurements`` is connected to a publisher before the
+        merger's retained measurements are fetched: one published between that fetch and the connection (a store
+        starting beside a running merger on a busy robot) would reach the store by neither way."""
+        deadline = time.monotonic() + timeout
+        while self.sub.get_num_connections() == 0 and time.monotonic() < deadline and not rospy.is_shutdown():
+            time.sleep(0.05)
+
     @staticmethod
     def _recovered(since: Optional[float], recovered: List[Reading], added: int) -> str:
         if since is None:
@@ -148,6 +157,8 @@ class ManagerNode:
         with self.lock:                                 # a promotion without a state: the own content's newest
             since = None if self.ledger.storing or self.relay is not None else \
                 self.ledger.missing_since(self.ledger.newest_time)
+        if since is not None and self.sub is not None:
+            self._await_input(self.p.recover_timeout)
         recovered = self._recover(since)
         self.migration.discard_prepared()               # (promoted without a state: not used)
         with self.instance.lock, self.lock:
