@@ -98,12 +98,13 @@ def finish_mission(tb: Testbed, port: int) -> None:
 def restore_watch(tb: Testbed, folder: str, port: int):
     """Both masters of the testbed, polled from their namespaces against the bridges' configurations the mission
     wrote (config/bridge.yaml overlaid by the host's allow-lists in ``<folder>/logs``)."""
+    from cnr_testbed.netns import inside
     from multimaster_bridge.watch import RestoreWatch
     shared = os.path.join(results.WS, 'config', 'bridge.yaml')
     return RestoreWatch(f'http://{tb.robot_address}:{port}', f'http://{tb.cloud_address}:{port}',
                         [shared, os.path.join(folder, 'logs', 'bridge_robot.yaml')],
                         [shared, os.path.join(folder, 'logs', 'bridge_cloud.yaml')],
-                        robot_netns=tb.namespace('robot'), cloud_netns=tb.namespace('cloud'))
+                        robot_netns=tb.namespace('robot'), cloud_netns=tb.namespace('cloud'), enter=inside)
 
 
 def run_one(tb: Testbed, config: str, folder: str, events: List[Outage], port: int = MASTER_PORT) -> int:
