@@ -18,6 +18,8 @@ def test_active_intervals_end_at_a_lapse_a_freeze_or_the_end_of_the_log():
     iv = flap.active_intervals(log)
     assert iv['mfg@cloud'] == [flap.Interval(12.0, 20.0), flap.Interval(21.0, 30.0)]
     assert iv['mfg@robot'] == [flap.Interval(31.0, 40.0)]
+    sim_time = '[INFO] [1795887627.977839, 44.260000]: mfg@robot: active (term 3)\n'    # under /use_sim_time
+    assert flap.active_intervals([sim_time]) == {'mfg@robot': [flap.Interval(1795887627.977839, 1795887627.977839)]}
 
 
 def test_most_active_at_once_counts_overlaps_per_module_only():
@@ -33,7 +35,8 @@ def event(i, wall_start, wall_end):
 
 
 def test_a_failover_is_timed_from_the_cut_it_followed_to_the_target_instance_active():
-    log = ['[WARN] [105.500000]: mfg: the active instance on cloud lost its lease (cut off?): failing over to robot\n']
+    log = ['[WARN] [105.500000, 33.66]: mfg: the active instance on cloud lost its lease (cut off?): failing over to '
+           'robot\n']
     found = flap.failovers(log)
     assert found == [(105.5, 'mfg', 'robot')]
     intervals = {'mfg@robot': [flap.Interval(50.0, 60.0), flap.Interval(105.8, 200.0)]}
@@ -54,7 +57,7 @@ def write_run(folder, summary, played, restores, logs=()):
     results.write_tsv(os.path.join(folder, 'schedule.tsv'), flap.SCHEDULE_COLUMNS,
                       [[getattr(e, c) for c in flap.SCHEDULE_COLUMNS] for e in played])
     results.write_tsv(os.path.join(folder, 'restore.tsv'), flap.RESTORE_COLUMNS,
-                      [[e.index, e.wall_end, r] for e, r in zip(played, restores)])
+                      [[e.index, e.wall_end, r, ''] for e, r in zip(played, restores)])
     for name, text in logs:
         with open(os.path.join(folder, 'logs', name), 'w') as f:
             f.write(text)

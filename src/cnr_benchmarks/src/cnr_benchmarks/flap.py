@@ -144,9 +144,10 @@ def run_one(tb: Testbed, config: str, folder: str, events: List[Outage], port: i
     os.makedirs(folder, exist_ok=True)
     results.write_tsv(os.path.join(folder, 'schedule.tsv'), core.SCHEDULE_COLUMNS,
                       [[p[c] for c in core.SCHEDULE_COLUMNS] for p in played])
+    restored = watch.results() if watch is not None else None
     results.write_tsv(os.path.join(folder, 'restore.tsv'), core.RESTORE_COLUMNS,
-                      [[i, p['wall_end'], r] for i, (p, r) in
-                       enumerate(zip(played, watch.results().restores if watch is not None else []))])
+                      [[i, p['wall_end'], r, '; '.join(problems[:3])] for i, (p, r, problems) in
+                       enumerate(zip(played, restored.restores, restored.last_problems))] if restored else [])
     with open(os.path.join(folder, 'status'), 'w') as f:
         f.write(f'{status}\n')
     if status == report.EXIT_INTERRUPTED:

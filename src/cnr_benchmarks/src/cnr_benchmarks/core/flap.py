@@ -35,12 +35,14 @@ CONFIGS: Dict[str, Tuple[str, Tuple[str, ...]]] = {
 STANDSTILL_SLACK = 2.0      # s: the robot with a task pending gets a goal within (outage + this)
 RESTORE_GOAL = 1.0          # s: registrations restored this long after the link returns at most
 SCHEDULE_COLUMNS = ['index', 'start', 'duration', 'direction', 'kind', 'loss', 'wall_start', 'wall_end']
-RESTORE_COLUMNS = ['index', 'wall_end', 'restored_after']
+RESTORE_COLUMNS = ['index', 'wall_end', 'restored_after', 'last_problems']
 
-_LOG_LINE = re.compile(r'\[(?:INFO|WARN|ERROR)\] \[(?P<t>\d+\.\d+)\]: (?P<id>[\w/]+@\w+): (?P<what>.*)$')
+# rospy's console lines: ``[INFO] [<wall time>]: ...``, or ``[INFO] [<wall time>, <sim time>]: ...`` under sim time
+_STAMP = r'\[(?:INFO|WARN|ERROR)\] \[(?P<t>\d+\.\d+)(?:, [\d.]+)?\]: '
+_LOG_LINE = re.compile(_STAMP + r'(?P<id>[\w/]+@\w+): (?P<what>.*)$')
 _ACTIVE = re.compile(r'active \(term (\d+)\)')
 _INACTIVE = ('lease lapsed', 'frozen', 'superseded', 'dormant')
-_FAILOVER = re.compile(r'\[(?:INFO|WARN|ERROR)\] \[(?P<t>\d+\.\d+)\]: (?P<module>\w+): .*failing over to (?P<host>\w+)')
+_FAILOVER = re.compile(_STAMP + r'(?P<module>\w+): .*failing over to (?P<host>\w+)')
 
 
 def run_folder(scratch: str, config: str, index: int) -> str:
