@@ -187,7 +187,8 @@ class ManagedInstance:
         self.status_pub = rospy.Publisher(topic(module, f'{self.host}/status'), InstanceStatus, queue_size=5,
                                           latch=True)
         for t in lease_topics(module, 'lease', paths):
-            rospy.Subscriber(t, MigrationLease, self._on_lease, queue_size=20)
+            # no Nagle: an answer sent behind a lost one is not held back until that one is acknowledged
+            rospy.Subscriber(t, MigrationLease, self._on_lease, queue_size=20, tcp_nodelay=True)
         self.replica_sub: Optional[rospy.Subscriber] = None
         # the newest replica not given to prepare_state yet: (instance, seq, whole state)
         self.to_prepare: Optional[Tuple[str, int, Dict[str, Any]]] = None

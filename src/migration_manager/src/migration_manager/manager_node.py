@@ -128,7 +128,8 @@ class Manager:
         self.agents = {h: rospy.ServiceProxy(f'/migration/agents/{h}/command', AgentCommand) for h in cfg.hosts}
         for m in cfg.modules:
             for t in lease_topics(m, 'renew', cfg.lease.paths):
-                rospy.Subscriber(t, MigrationRenew, self._on_renew, queue_size=50)
+                # no Nagle: a request sent behind a lost one is not held back until that one is acknowledged
+                rospy.Subscriber(t, MigrationRenew, self._on_renew, queue_size=50, tcp_nodelay=True)
             rospy.Subscriber(topic(m, 'state'), ModuleState, self._on_state, queue_size=2)
             for h in cfg.hosts:
                 rospy.Subscriber(topic(m, f'{h}/status'), InstanceStatus, self._on_status, queue_size=10)
