@@ -87,10 +87,16 @@ def test_a_run_on_the_goal_line_and_runs_off_it(tmp_path):
                                 standstill=dict(longest=30.0, longest_start=100.0)), played, [0.3, ''])
     run2 = flap.load_run(bad, 'paper_normal', 2)
     failures = ' '.join(run2.goal_failures())
-    for word in ('not completed', 'missing 1', 'standstill 30.0 s', '1 not restored'):
+    for word in ('not completed', 'missing 1', 'standstill 30.0 s', '1 not restored',
+                 'not restored after the last outage'):
         assert word in failures
-    md = flap.page_body([run, run2], 2, 1)
-    assert '| paper_normal | 2 (1) | 4 |' in md and '1 of 2' in md and 'paper_normal run 2' in md
+    assert 'restore max' not in ' '.join(run2.invariant_failures())
+    slow = flap.run_folder(str(tmp_path), 'paper_normal', 3)
+    write_run(slow, good_summary(), played, [0.3, 3.0])
+    run3 = flap.load_run(slow, 'paper_normal', 3)
+    assert run3.invariant_failures() == [] and run3.goal_failures() == ['restore max 3.00 s, 0 not restored']
+    md = flap.page_body([run, run2, run3], 2, 1)
+    assert '| paper_normal | 3 (2) | 6 |' in md and '1 of 3' in md and 'paper_normal run 2' in md
 
 
 def test_an_unfinished_run_is_none_and_every_config_has_mission_arguments(tmp_path):
