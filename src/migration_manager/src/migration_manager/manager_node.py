@@ -433,11 +433,16 @@ class Manager:
 
     def start_modules(self) -> None:
         """The initial placement; a module the cloud cannot take (link down) starts on the robot."""
-        def start(module: str, host: str) -> None:
+        def agent_up(module: str, host: str) -> bool:
             try:                     # the agent there may still be starting (it resolves its launches first)
                 self.agents[host].wait_for_service(self.cfg.timeouts.start)
+                return True
             except rospy.ROSException:
                 rospy.logwarn(f'{module}: the agent on {host} is not there after {self.cfg.timeouts.start:g} s')
+                return False
+
+        def start(module: str, host: str) -> None:
+            agent_up(module, host)
             _, m = self.run_migration(module, host, 'cold')
             if m.step is not Step.DONE and host != self.cfg.authority:
                 rospy.logwarn(f'{module}: cannot start on {host} ({m.error}): starting it on {self.cfg.authority}')
@@ -449,8 +454,14 @@ class Manager:
                 time.sleep(1.0)
                 _, m = self.run_migration(module, self.cfg.authority, 'cold')
             for other in self.cfg.hosts:
-                if module in self.cfg.hot_standby and other != self.books[module].host():
-                    self._call(self.agents[other], 'start', module)
+                # the warm standby on the other host: its agent may be later than the first start's (a store
+                # started on the cloud before the robot's agent was up had no standby on the robot, and its
+                # failover had to start one under the robot's CPU cap)
+                if module in self.cfg.hot_standby and other != self.books[module].host() and agent_up(module, other):
+                    ok, res = self._call(self.agents[other], 'start', module)
+                    if not ok or not res.ok:
+                        rospy.logwarn(f'{module}: no warm standby on {other}: '
+                                      f'{res if not ok else res.message}')
         threads = [threading.Thread(target=start, args=item, daemon=True) for item in self.initial.items()]
         for t in threads:
             t.start()
