@@ -64,13 +64,9 @@ def main(argv: Optional[List[str]] = None) -> int:
     ap.add_argument('--runs', type=cli.positive_int, default=5, help='runs per mode (default %(default)s)')
     ap.add_argument('--modes', type=cli.comma_list(list(deadzone.MODES)), default='normal,network_aware',
                     help='comma-separated modes (default %(default)s)')
-    ap.add_argument('--out', default=results.results_dir(EXPERIMENT), help="the page's folder (default %(default)s)")
-    ap.add_argument('--fresh', action='store_true', help='start over: the runs made before are removed')
+    report.add_resumable_arguments(ap, EXPERIMENT)
     args = ap.parse_args(argv)
-    cli.require_root(ap.prog, 'the testbed: network namespaces, TUN devices, cgroups')
-    scratch = results.scratch_dir(EXPERIMENT)
-    if args.fresh:
-        shutil.rmtree(os.path.join(scratch, 'runs'), ignore_errors=True)
+    scratch = report.resumable_scratch(ap.prog, args, EXPERIMENT)
     t0 = time.monotonic()
     for i, mode, folder, prefix in report.pending_runs(ap.prog, args.runs, args.modes,
                                                        functools.partial(deadzone.run_folder, scratch)):

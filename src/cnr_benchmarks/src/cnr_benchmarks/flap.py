@@ -166,13 +166,9 @@ def main(argv: Optional[List[str]] = None) -> int:
                     help='comma-separated configurations (default: all)')
     ap.add_argument('--outages', type=cli.positive_int, default=20, help='events per schedule (default %(default)s)')
     ap.add_argument('--seed', type=int, default=1, help='run i plays the schedule of seed SEED + i (default %(default)s)')
-    ap.add_argument('--out', default=results.results_dir(EXPERIMENT), help="the page's folder (default %(default)s)")
-    ap.add_argument('--fresh', action='store_true', help='start over: the runs made before are removed')
+    report.add_resumable_arguments(ap, EXPERIMENT)
     args = ap.parse_args(argv)
-    cli.require_root(ap.prog, 'the testbed: network namespaces, TUN devices, cgroups')
-    scratch = results.scratch_dir(EXPERIMENT)
-    if args.fresh:
-        shutil.rmtree(os.path.join(scratch, 'runs'), ignore_errors=True)
+    scratch = report.resumable_scratch(ap.prog, args, EXPERIMENT)
     tb = Testbed(TESTBED_CONFIG)
     brought_up = not tb.running()
     if brought_up:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -12,7 +13,7 @@ import time
 from typing import IO, Callable, Dict, Iterable, Iterator, List, NoReturn, Optional, Sequence, Tuple, TypeVar
 
 from cnr_benchmarks.results import WS, results_dir, scratch_dir, tsv_cell
-from cnr_harness.script import EXIT_INTERRUPTED
+from cnr_harness.script import EXIT_INTERRUPTED, require_root
 
 T = TypeVar('T')
 
@@ -103,6 +104,21 @@ def call(argv: Sequence[str], output: Optional[IO] = None) -> int:
 
 def progress(msg: str) -> None:
     print(msg, flush=True)
+
+
+def add_resumable_arguments(ap: argparse.ArgumentParser, experiment: str) -> None:
+    """``--out`` (the page's folder) and ``--fresh`` of an experiment made of resumable testbed runs."""
+    ap.add_argument('--out', default=results_dir(experiment), help="the page's folder (default %(default)s)")
+    ap.add_argument('--fresh', action='store_true', help='start over: the runs made before are removed')
+
+
+def resumable_scratch(prog: str, args: argparse.Namespace, experiment: str) -> str:
+    """The testbed experiment's scratch folder (root checked first); ``--fresh`` removes the runs made before."""
+    require_root(prog, 'the testbed: network namespaces, TUN devices, cgroups')
+    scratch = scratch_dir(experiment)
+    if args.fresh:
+        shutil.rmtree(os.path.join(scratch, 'runs'), ignore_errors=True)
+    return scratch
 
 
 def pending_runs(prog: str, runs: int, keys: Sequence[str],
