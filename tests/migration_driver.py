@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import threading
 import time
-from typing import Any, Dict, Optional, Sequence
+from typing import Any, Callable, Dict, Optional, Sequence, Tuple
 
 import rospy
 
@@ -38,6 +38,28 @@ def managed_params(workspace: str, host: str = 'robot') -> Dict[str, Any]:
     import os
     from cnr_params import load_yaml
     return dict(load_yaml(os.path.join(workspace, 'config', 'migration.yaml')), role='standby', host=host)
+
+
+def instance_names(module: str) -> Dict[str, str]:
+    """The node name of a module's instance on each host in the one-master tests (robot: the module's, cloud:
+    ``<module>_b``)."""
+    return {'robot': module, 'cloud': f'{module}_b'}
+
+
+def instance_starter(master, driver: 'LeaseDriver', module: str, params_of: Callable[[str], Dict[str, Any]],
+                     log_prefix: str) -> Tuple[Callable[[str], Any], Dict[str, Any]]:
+    """``start(host)``: one managed instance of ``module`` on ``master`` (named by :func:`instance_names`) with
+    ``params_of(host)``, waited for as a standby; and the processes started, by host."""
+    procs: Dict[str, Any] = {}
+    names = instance_names(module)
+
+    def start(host: str):
+        name = names[host]
+        master.call('setParam', f'/{name}', params_of(host))
+        procs[host] = master.run(['rosrun', module, module, f'__name:={name}'], f'{log_prefix}_{host}')
+        driver.wait_standby(30, host=host)
+        return procs[host]
+    return start, procs
 
 
 class LeaseDriver:

@@ -127,24 +127,18 @@ def stored(node, n):
 def lmm(ros, workspace, tmp_path):
     """Starts managed instances on demand: start('robot') is /local_mapcell_manager, start('cloud')
     /local_mapcell_manager_b; one LeaseDriver for both."""
-    from migration_driver import LeaseDriver
+    from migration_driver import LeaseDriver, instance_names, instance_starter
     driver = LeaseDriver(MODULE, hosts=('robot', 'cloud'))
     stream = Stream()
-    procs, names = {}, {'robot': MODULE, 'cloud': f'{MODULE}_b'}
-
-    def start(host):
-        name = names[host]
-        ros.master.call('setParam', f'/{name}', node_params(workspace, tmp_path / f'{host}.tsv', host))
-        procs[host] = ros.master.run(['rosrun', MODULE, MODULE, f'__name:={name}'], f'lmm_{host}')
-        driver.wait_standby(30, host=host)
-        return procs[host]
+    start, procs = instance_starter(ros.master, driver, MODULE,
+                                    lambda host: node_params(workspace, tmp_path / f'{host}.tsv', host), 'lmm')
     yield start, driver, stream, tmp_path
     for proc in procs.values():
         ros.master.stop_child(proc)
     stream.close()
     driver.close()
     for host in procs:
-        ros.master.call('deleteParam', f'/{names[host]}')
+        ros.master.call('deleteParam', f'/{instance_names(MODULE)[host]}')
 
 
 class Replicas:

@@ -48,20 +48,14 @@ def stored_keys(node, n):
 
 @pytest.fixture
 def relay(ros, workspace, tmp_path):
-    from migration_driver import LeaseDriver
+    from migration_driver import LeaseDriver, instance_names, instance_starter
     driver = LeaseDriver(MODULE, hosts=('robot', 'cloud'))
     stream = Stream()
     ros.master.call('setParam', '/store_forward_sender', sender_params(workspace, tmp_path / 'queue'))
     sender = ros.master.run(['rosrun', 'cnr_store_forward', 'sender'], 'relay_sender')
     wait_until(lambda: stream.pub.get_num_connections() >= 1, 30, 'the sender subscribed to merged_measurements')
-    procs, names = {}, {'robot': MODULE, 'cloud': f'{MODULE}_b'}
-
-    def start(host):
-        name = names[host]
-        ros.master.call('setParam', f'/{name}', relay_params(workspace, tmp_path / f'{host}.tsv', host))
-        procs[host] = ros.master.run(['rosrun', MODULE, MODULE, f'__name:={name}'], f'lmm_relay_{host}')
-        driver.wait_standby(30, host=host)
-        return procs[host]
+    start, procs = instance_starter(ros.master, driver, MODULE,
+                                    lambda host: relay_params(workspace, tmp_path / f'{host}.tsv', host), 'lmm_relay')
     yield start, driver, stream, sender, tmp_path
     for proc in procs.values():
         if proc.alive():
@@ -69,7 +63,7 @@ def relay(ros, workspace, tmp_path):
     ros.master.stop_child(sender)
     stream.close()
     driver.close()
-    for name in ['store_forward_sender', *names.values()]:
+    for name in ['store_forward_sender', *instance_names(MODULE).values()]:
         ros.master.call('deleteParam', f'/{name}')
 
 
