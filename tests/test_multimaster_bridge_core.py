@@ -128,6 +128,20 @@ def test_a_node_the_master_still_holds_keeps_its_spelling():
     assert sync.respell({a, b}, kept) == {a._replace(caller_api='http://10.77.0.1:45105/'), b}
 
 
+def test_a_remote_node_started_again_at_a_new_uri_is_registered_there_at_once():
+    """A cloud module failed over and started again as a standby: same name, new port. A spelling kept for the
+    old process must not hold its proxy at the dead URI, and the new URI waits for nothing (the master may hold the
+    old process for ever, through a service of it that a local provider took over)."""
+    kept = {'/cloud/global_goal_manager': 'http://10.77.0.2:38921/'}
+    new = sync.Registration('pub', '/global_goal', '/cloud/global_goal_manager', 'http://10.77.0.2:39863',
+                            'geometry_msgs/PoseStamped')
+    assert sync.respell({new}, kept) == {new}
+    assert not sync.must_wait('http://10.77.0.2:38921/', 'http://10.77.0.2:39863')
+    assert not sync.must_wait(None, 'http://10.77.0.2:39863')
+    assert not sync.must_wait('http://10.77.0.2:39863', 'http://10.77.0.2:39863')
+    assert sync.must_wait('http://10.77.0.2:39863/', 'http://10.77.0.2:39863')      # a change of spelling waits
+
+
 def test_diff_and_identity_conflicts():
     a = sync.Registration('pub', '/t', '/cloud/n', 'http://h:1/', 'std_msgs/String')
     b = sync.Registration('pub', '/t', '/cloud/n', 'http://h:1', 'std_msgs/String')

@@ -110,3 +110,27 @@ def test_a_node_the_master_still_holds_keeps_its_uri_spelling_and_the_real_node_
             if node.poll() is None:
                 node.kill()
             node.wait()
+
+
+def test_a_remote_node_started_again_replaces_the_entry_a_taken_over_service_kept():
+    """The old process's proxy left an entry the bridge cannot remove (its service, taken over by a local provider).
+    The node, started again on its host at a new URI, is registered there at once (must_wait): the master then
+    holds the new URI, and subscribers are given the new publisher, not the dead one."""
+    with RosMaster() as master:
+        px = xmlrpc.client.ServerProxy(master.uri)
+        old, new = 'http://127.0.0.1:38921/', 'http://127.0.0.1:39863/'
+        px.registerPublisher('/cloud/ggm', '/global_goal', 'std_msgs/String', old)
+        px.registerService('/cloud/ggm', '/next_goal', 'rosrpc://127.0.0.1:1', old)
+        px.registerService('/ggm', '/next_goal', 'rosrpc://127.0.0.1:2', 'http://127.0.0.1:3/')   # failed over here
+        client = MasterClient(master.uri, '/bridge')
+        gone = [sync.Registration('pub', '/global_goal', '/cloud/ggm', old, 'std_msgs/String'),
+                sync.Registration('srv', '/next_goal', '/cloud/ggm', old, 'rosrpc://127.0.0.1:1')]
+        client.apply(gone, [])
+        assert client.node_apis(['/cloud/ggm']) == {'/cloud/ggm': old}     # held for ever by the service entry
+        assert not sync.must_wait(old, new)
+        again = sync.Registration('pub', '/global_goal', '/cloud/ggm', new, 'std_msgs/String')
+        assert client.apply([], [again]) == []
+        assert client.node_apis(['/cloud/ggm']) == {'/cloud/ggm': new}
+        pubs = dict(px.getSystemState('/test')[2][0])
+        assert pubs['/global_goal'] == ['/cloud/ggm']
+        assert px.lookupNode('/test', '/cloud/ggm')[2] == new

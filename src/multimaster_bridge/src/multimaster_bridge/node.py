@@ -434,8 +434,7 @@ class Bridge:
                     desired = sync.respell(desired, peer.kept_spelling)
                     unregister, register = sync.diff(peer.registered, desired)
             # a proxy's URI spelling changes only after its old registrations are gone from the master
-            waiting = {r.caller_id for r in register
-                       if r.caller_id in snap.nodes and snap.nodes[r.caller_id] != r.caller_api}
+            waiting = {r.caller_id for r in register if sync.must_wait(snap.nodes.get(r.caller_id), r.caller_api)}
             waiting |= sync.conflicting_identities(register, peer.registered - set(unregister))
             register = [r for r in register if r.caller_id not in waiting]
             for r in register:

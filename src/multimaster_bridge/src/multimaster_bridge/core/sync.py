@@ -299,8 +299,20 @@ def kept_spellings(wanted: Dict[str, str], known: Dict[str, str]) -> Dict[str, s
 
 
 def respell(registrations: Iterable[Registration], apis: Dict[str, str]) -> Set[Registration]:
-    """``registrations`` with each caller_id in ``apis`` registered at that URI instead."""
-    return {r._replace(caller_api=apis[r.caller_id]) if r.caller_id in apis else r for r in registrations}
+    """``registrations`` with each caller_id in ``apis`` registered at that URI instead, where that URI is a
+    spelling of the same node's. A remote node started again (another port, same name) is registered at its new
+    URI: a kept spelling of the old process must not keep its proxy pointing at a dead node."""
+    return {r._replace(caller_api=apis[r.caller_id])
+            if r.caller_id in apis and same_node(apis[r.caller_id], r.caller_api) else r for r in registrations}
+
+
+def must_wait(held: Optional[str], wanted: str) -> bool:
+    """Whether a proxy's registration at ``wanted`` waits until the master no longer holds its caller_id at
+    ``held``: only for a change of spelling of one node (registering it would make rosmaster shut down the URI it
+    holds, the real node). A remote node started again at a new URI is registered at once: rosmaster then tells the
+    old process, gone or replaced on its own host, to shut down, and drops the entry that a registration of it no
+    longer removable (a service a local provider took over) would otherwise keep for ever."""
+    return held is not None and held != wanted and same_node(held, wanted)
 
 
 def conflicting_identities(to_register: Iterable[Registration], keep: Iterable[Registration]) -> Set[str]:
