@@ -4,7 +4,9 @@ cloud) leaves it standing still; hands back as soon as the source's goal is purs
 
 Decisions: :class:`mfg.core.standin.Standin` (ROS-free); goals: the robot's own least-recently-visited cells
 (:class:`mfg.core.fallback.LocalGoals`, the global goal manager's policy) from the time the robot was last in each
-cell (its own pose: no measurement has to cross the link).
+cell (its own pose: no measurement has to cross the link). Comms loss (:class:`mfg.core.standin.CommsLoss`, from
+the multimaster bridge's ``link_quality``): with neither a goal of the source nor a good link for
+``comms_loss.after``, its goal is the place where the link to the cloud was last good instead.
 """
 from __future__ import annotations
 
@@ -21,7 +23,7 @@ from std_msgs.msg import Bool
 
 import cnr_params
 from cnr_maps.grid import MapcellGrid
-from cnr_msgs.msg import CellStates, MfgActivity, SearchState
+from cnr_msgs.msg import CellStates, LinkQuality, MfgActivity, SearchState
 from cnr_params.ros import private_section
 from cnr_runtime import init_node
 from mfg.core.fallback import LocalGoals
@@ -46,12 +48,17 @@ class GoalStandin:
         self.client = actionlib.SimpleActionClient('move_base', MoveBaseAction)
         self.standing_pub = rospy.Publisher('~standing_in', Bool, queue_size=1, latch=True)
         self.standing_pub.publish(Bool(False))
+        self.returning_pub = rospy.Publisher('~returning', Bool, queue_size=1, latch=True)
+        self.returning_pub.publish(Bool(False))
+        self.returning = False                   # a comms loss is on: driving back to the last good link, or there
         w = p.watch
         rospy.Subscriber('move_base/status', GoalStatusArray, self._on_status, queue_size=5)
         rospy.Subscriber(w.heartbeat_topic, MfgActivity, self._on_heartbeat, queue_size=1)
         rospy.Subscriber(w.state_topic, SearchState, self._on_state, queue_size=10)
         rospy.Subscriber('cell_states', CellStates, self._on_cells, queue_size=1)
         rospy.Subscriber(p.pose_topic, Odometry, self._on_pose, queue_size=1)
+        if p.comms_loss.enabled:
+            rospy.Subscriber(p.comms_loss.link_topic, LinkQuality, self._on_link, queue_size=10)
         rospy.Timer(rospy.Duration(1.0 / p.rate), self._step)
 
     @staticmethod
@@ -76,6 +83,12 @@ class GoalStandin:
             if self.grid is None and msg.cells:
                 self.grid = MapcellGrid.from_cell_states(msg)
 
+    def _on_link(self, msg: LinkQuality) -> None:
+        with self.lock:
+            comms = self.core.comms
+            good = comms.judge.good(msg.peer, msg.alive, msg.loss, msg.rtt, msg.received)
+            comms.link(self._now(), good, self.pose)
+
     def _on_pose(self, msg: Odometry) -> None:
         x, y = msg.pose.pose.position.x, msg.pose.pose.position.y
         with self.lock:
@@ -91,8 +104,11 @@ class GoalStandin:
             if self.core.handed_back():
                 rospy.loginfo('goal_standin: the goal source\'s goal is pursued again: handed back')
                 self.standing_pub.publish(Bool(False))
-            if in_flight(self.client) and not (unacknowledged(self.client) and
-                                               time.monotonic() - self.sent_wall > self.p.ack_timeout):
+            flying = in_flight(self.client)
+            resend = flying and unacknowledged(self.client) and time.monotonic() - self.sent_wall > self.p.ack_timeout
+            if self._comms_loss(now, flying, resend):
+                return
+            if flying and not resend:
                 return                           # its goal is being driven to (or its acknowledgement awaited)
             if not self.core.due(now):
                 return
@@ -106,25 +122,64 @@ class GoalStandin:
             if index is None:
                 return
             c = self.grid.cell(index)
-            goal = move_base_goal(c.center_x, c.center_y, facing_away(self.pose, c.center_x, c.center_y),
-                                  self.p.frame_id)
-            goal.target_pose.header.stamp = rospy.Time.now()
-            # sent before anything else (logging included): the less time between the decision and the goal, the
-            # less chance that a goal of the source sent meanwhile is preempted by this one
-            self.client.send_goal(goal)
-            self.sent_wall = time.monotonic()
-            first = not self.core.standing_in
-            self.core.sent()
-            self.goals_sent += 1
+            first = self._send(c.center_x, c.center_y)
             if first:
                 path = self.core.path
                 heard = 'never' if path.last_heartbeat is None else f'{now - path.last_heartbeat:.1f} s ago'
                 rospy.logwarn(f'goal_standin: no goal for {now - path.standing_since(now):.1f} s and the goal source '
                               f'(mode {path.mode or "unknown"}, last heard {heard}) does not hold the robot: '
                               f'driving its own {LocalGoals.name} goals until the source gives one again')
-                self.standing_pub.publish(Bool(True))
             rospy.loginfo(f'goal_standin: goal {self.goals_sent}: cell {index} (col {c.col}, row {c.row}) at '
                           f'({c.center_x:.1f}, {c.center_y:.1f})')
+
+    def _send(self, x: float, y: float) -> bool:
+        """Send its goal at (x, y); True if it is its first since it last handed back."""
+        goal = move_base_goal(x, y, facing_away(self.pose, x, y), self.p.frame_id)
+        goal.target_pose.header.stamp = rospy.Time.now()
+        # sent before anything else (logging included): the less time between the decision and the goal, the
+        # less chance that a goal of the source sent meanwhile is preempted by this one
+        self.client.send_goal(goal)
+        self.sent_wall = time.monotonic()
+        first = not self.core.standing_in
+        self.core.sent()
+        self.goals_sent += 1
+        if first:
+            self.standing_pub.publish(Bool(True))
+        return first
+
+    def _comms_loss(self, now: float, flying: bool, resend: bool) -> bool:
+        """The comms-loss behaviour's step; True while it decides the stand-in's goal (driving back to the last
+        place with a good link, or waiting there for the link). ``flying``: the goal last sent is not over;
+        ``resend``: ... but move_base has not acknowledged it within ``ack_timeout``."""
+        comms = self.core.comms
+        target = comms.goal(now)
+        if target is None:
+            if self.returning:
+                self.returning = False
+                self.returning_pub.publish(Bool(False))
+                why = 'waited there without it' if comms.given_up else 'the link or the source\'s goal is back'
+                rospy.logwarn(f'goal_standin: comms loss over ({why}): the ordinary stand-in goes on')
+            return False
+        if comms.driving:
+            if flying and resend:
+                self._send(*target)
+            if flying:
+                return True                      # on its way back
+            comms.ended(now)                     # there (or move_base gave up): wait for the link
+            rospy.loginfo(f'goal_standin: back at the last place with a good link ({target[0]:.1f}, '
+                          f'{target[1]:.1f}): waiting for the link')
+            return True
+        if comms.arrived is not None:
+            return True
+        self._send(*target)
+        comms.sent()
+        if not self.returning:
+            self.returning = True
+            self.returning_pub.publish(Bool(True))
+        rospy.logwarn(f'goal_standin: comms loss: no goal of the source and no good link to '
+                      f'{self.p.comms_loss.peer} for {now - comms.lost_since(now):.1f} s: goal {self.goals_sent}: '
+                      f'back to ({target[0]:.1f}, {target[1]:.1f}), the last place with a good link')
+        return True
 
 
 @cnr_params.exit_on_config_error

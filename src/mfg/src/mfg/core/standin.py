@@ -9,11 +9,18 @@ the robot still on purpose while it measures a cell).
 standing still *with a task pending* on the source's account (None: it has a goal, or the source holds it on
 purpose, or no task was given yet). The stand-in (``goal_standin``) sends its own patrol goal when that has
 lasted ``timeout``; the mission monitor reports the longest such interval (:class:`Standstill`).
+
+:class:`CommsLoss` is the field robot's comms-loss behaviour on top: from the multimaster bridge's link quality to
+the cloud (:class:`LinkJudge`) it keeps the robot's path where the link was good; when the robot has had neither a
+goal of the source pursued, nor a good link, nor the source's heartbeat for ``comms_loss.after``, the stand-in's
+goal is the place where the link was last good (instead of a patrol goal), until the link is good again.
 """
 from __future__ import annotations
 
+import math
+from collections import deque
 from dataclasses import dataclass
-from typing import Callable, Iterable, Optional, Tuple
+from typing import Callable, Deque, Iterable, Optional, Tuple
 
 from cnr_params import Section
 
@@ -34,8 +41,21 @@ class WatchParams:
 
 
 @dataclass(frozen=True)
+class CommsLossParams:
+    """The comms-loss behaviour (the ``comms_loss`` section): back to the last place with a good link."""
+    enabled: bool
+    after: float                   # s without a source's goal pursued, a good link and the source's heartbeat
+    margin: float                  # m back along the robot's path with a good link from where it was last good
+    link_topic: str                # the multimaster bridge's cnr_msgs/LinkQuality
+    peer: str                      # the peer (bridge name) whose link counts
+    max_loss: float                # heartbeat loss ratio (the bridge's window) of a good link, at most
+    max_rtt: float                 # s, round-trip time of a good link, at most
+
+
+@dataclass(frozen=True)
 class StandinParams:
     watch: WatchParams
+    comms_loss: CommsLossParams
     timeout: float                 # s standing still (no goal, no hold) before the stand-in sends a goal
     ack_timeout: float             # wall s: a goal move_base has not acknowledged within this is sent again
     pose_topic: str
@@ -57,10 +77,19 @@ def read_watch(p: Section) -> WatchParams:
                        state_topic=s.string('state_topic'))
 
 
+def read_comms_loss(p: Section) -> CommsLossParams:
+    """``comms_loss.*`` of config/goal_standin.yaml (no defaults in code)."""
+    s = p.section('comms_loss')
+    return CommsLossParams(enabled=s.boolean('enabled'), after=s.number('after', positive=True),
+                           margin=s.number('margin', nonnegative=True), link_topic=s.string('link_topic'),
+                           peer=s.string('peer'), max_loss=s.number('max_loss', minimum=0.0, maximum=1.0),
+                           max_rtt=s.number('max_rtt', positive=True))
+
+
 def read_params(p: Section) -> StandinParams:
     s = p.section('standin')
-    return StandinParams(watch=read_watch(p), timeout=s.number('timeout', positive=True),
-                         ack_timeout=s.number('ack_timeout', positive=True),
+    return StandinParams(watch=read_watch(p), comms_loss=read_comms_loss(p),
+                         timeout=s.number('timeout', positive=True), ack_timeout=s.number('ack_timeout', positive=True),
                          pose_topic=s.string('pose_topic'), frame_id=s.string('frame_id'),
                          rate=s.number('rate', positive=True))
 
@@ -75,6 +104,7 @@ class GoalPath:
         self.last_status: Optional[float] = None
         self.active = False                         # the newest status list holds a pursued goal
         self.foreign_active = False                 # ... one that is not the stand-in's
+        self.foreign_last: Optional[float] = None   # the last status list with a pursued goal not the stand-in's
         self.idle_since: Optional[float] = None     # the first status list without a pursued goal (after one with)
         self.last_heartbeat: Optional[float] = None
         self.mode = ''
@@ -89,6 +119,8 @@ class GoalPath:
         was_active = self.active if self.last_status is not None else True
         self.active = bool(pursued)
         self.foreign_active = any(not self.own(g) for g in pursued)
+        if self.foreign_active:
+            self.foreign_last = t
         if self.active:
             self.idle_since = None
         elif was_active or self.idle_since is None:
@@ -115,6 +147,10 @@ class GoalPath:
         if self._stale(now):
             return self.last_status if self.active else self.idle_since
         return None if self.active else self.idle_since
+
+    def source_goal(self, now: float) -> bool:
+        """A goal of the source (not the stand-in's) is pursued, by a status list that is not stale."""
+        return self.foreign_active and not self._stale(now)
 
     def alive(self, now: float) -> bool:
         """The source's heartbeat reached the robot within ``source_silence``."""
@@ -144,12 +180,116 @@ class GoalPath:
         return idle if self.hold_left is None else max(idle, self.hold_left)
 
 
+TRAIL_STEP = 0.05        # m: a position with a good link joins the trail this far from the last one (resolution)
+
+
+class LinkJudge:
+    """The good-link criterion on the multimaster bridge's ``link_quality`` (cnr_msgs/LinkQuality, per peer): the
+    peer is alive, a heartbeat of it arrived since the previous message (``received`` changed: the link carried
+    something just now, not only within the bridge's loss timeout), its loss ratio is at most ``max_loss`` and
+    its RTT at most ``max_rtt`` (unknown: not good)."""
+
+    def __init__(self, p: CommsLossParams) -> None:
+        self.p = p
+        self.received: Optional[int] = None
+
+    def good(self, peer: str, alive: bool, loss: float, rtt: float, received: int) -> Optional[bool]:
+        """Whether one message says the link is good now (None: the message is of another peer)."""
+        if peer != self.p.peer:
+            return None
+        fresh = self.received is None or received != self.received
+        self.received = received
+        return bool(alive and fresh and loss <= self.p.max_loss and rtt <= self.p.max_rtt)   # NaN: not good
+
+
+class CommsLoss:
+    """The comms-loss policy: where to drive back to when the robot has lost its goal source and its link.
+
+    It keeps the *trail*: the robot's positions at which the link was good, back to ``margin`` m of path from
+    the newest (a jump longer than that, across a dead zone, starts it again). Its target is the trail's oldest
+    position: the place where the link was last good, ``margin`` m back along the way the robot came, so that
+    the robot stops inside the good region, not at its edge. Times are the robot's clock [s]."""
+
+    def __init__(self, p: CommsLossParams, path: GoalPath) -> None:
+        self.p = p
+        self.path = path
+        self.judge = LinkJudge(p)
+        self.trail: Deque[Tuple[float, float]] = deque()
+        self.trail_length = 0.0                             # m of path along the trail
+        self.last_good: Optional[float] = None              # the newest message that said the link is good
+        self.target: Optional[Tuple[float, float]] = None   # the place it drives back to (a comms loss is on)
+        self.driving = False                                # its goal to the target is being driven to
+        self.arrived: Optional[float] = None                # when that goal ended (waiting there for the link)
+        self.given_up = False                               # arrived and waited ``after``: the place does not help
+
+    def link(self, t: float, good: Optional[bool], pose: Optional[Tuple[float, float]]) -> None:
+        """A link quality message at ``t`` judged ``good`` (:class:`LinkJudge`), the robot at ``pose`` then."""
+        if not good:
+            return
+        self.last_good = t
+        self._end()
+        if pose is not None:
+            self._extend(pose)
+
+    def _extend(self, pose: Tuple[float, float]) -> None:
+        if self.trail:
+            step = math.hypot(pose[0] - self.trail[-1][0], pose[1] - self.trail[-1][1])
+            if step < TRAIL_STEP:
+                return
+            self.trail_length += step
+        self.trail.append(pose)
+        while len(self.trail) > 1 and self.trail_length > self.p.margin:
+            first, second = self.trail[0], self.trail[1]
+            self.trail_length -= math.hypot(second[0] - first[0], second[1] - first[1])
+            self.trail.popleft()
+
+    def _end(self) -> None:
+        self.target, self.driving, self.arrived, self.given_up = None, False, None, False
+
+    def lost_since(self, now: float) -> Optional[float]:
+        """Since when the robot has had neither a goal of the source pursued nor a good link (None: it has one, or
+        the source's heartbeat still reaches it, or no task is pending, or the link was never good here)."""
+        path = self.path
+        if self.last_good is None or path.pending_since is None or path.alive(now) or path.source_goal(now):
+            return None
+        return self.last_good if path.foreign_last is None else max(self.last_good, path.foreign_last)
+
+    def goal(self, now: float) -> Optional[Tuple[float, float]]:
+        """The place the stand-in's goal is now, (x, y) [m] (None: no comms loss, or the robot reached the place
+        and waited ``after`` there without the link: the ordinary stand-in goes on)."""
+        if not self.p.enabled:
+            return None
+        if self.path.source_goal(now):
+            self._end()                       # the source's goal crossed: it drives, the loss is over
+            return None
+        since = self.lost_since(now)
+        if since is None or not self.trail or now - since < self.p.after or self.given_up:
+            return None
+        if self.arrived is not None and now - self.arrived >= self.p.after:
+            self.given_up = True
+            return None
+        if self.target is None:
+            self.target = self.trail[0]
+        return self.target
+
+    def sent(self) -> None:
+        """Its goal to the target was sent."""
+        self.driving = True
+
+    def ended(self, now: float) -> None:
+        """Its goal to the target ended (reached, or move_base gave up): it waits there for the link."""
+        if self.driving:
+            self.driving = False
+            self.arrived = now
+
+
 class Standin:
     """The stand-in's decisions: when to send a patrol goal of its own, when it has handed back."""
 
     def __init__(self, p: StandinParams, own: Callable[[str], bool]) -> None:
         self.p = p
         self.path = GoalPath(p.watch, own)
+        self.comms = CommsLoss(p.comms_loss, self.path)
         self.standing_in = False      # its goals drive the robot (since its first; until the source's goal)
 
     def handed_back(self) -> bool:
