@@ -22,8 +22,11 @@ and B_task the battery used until then (the mission report's ``task``); each run
 ``campaign``: ``--conditions`` link conditions drawn with ``--seed`` (cnr_benchmarks.core.campaign), each
 profiled once with the modules on the robot, decided by the robot's policy and run onload then offload; the
 robot's training set starts empty in ``<scratch>/training`` (cold start, then k-NN as it learns). Then
-``analyse``: the learning curve against the oracle beside the best static threshold, and Figures 5-1 to 5-6 in
-``<out>/``, with the page README.md.
+``analyse``: the learning curve against the oracle beside the best static threshold, Figures 5-1 to 5-6 and
+campaign_summary.json (the learned decision's measures on the held-out conditions beside the a-priori rules and the
+hindsight thresholds, and the figures' numbers: cnr_benchmarks.core.decision_measures) in ``<out>/``, with the page
+README.md. Without ``<scratch>/training`` the analysis reads the robot's set published beside the rows
+(``<out>/training_set.tsv``).
 
 ``local_remote`` (thesis Figs. 5-5/5-6): ``--runs`` runs local and as many remote (move_base on the cloud),
 alternating, on the unrestricted link, at each robot CPU slowdown of ``--slowdowns`` (the thesis compared local
@@ -88,11 +91,14 @@ CAMPAIGN_DOC = """The continuous experiment of thesis §5.
 --seed) on the two-host testbed, each profiled once with move_base on the robot and decided by network_monitor's
 migration_decider (k-NN), then run onload and offload on that profile; both runs evaluated (Eq. 4-5) and learned from
 an empty training set. Then the analysis: the decisions against the oracle of the paired runs, the learning curve
-beside the best static threshold, and Figures 5-1 to 5-6 beside the thesis's numbers, in docs/results/campaign/ (or
-DIR; with --slowdown S: docs/results/campaign_slowdown<S>/); the sessions' logs and the training set in
-bench_results/campaign[_slowdown<S>]/. Needs the control values (exp_control.sh) and root; uses the default testbed.
-Rows are appended as measured; run it again to resume. About 66 s per condition. --slowdown S: the robot's CPU capped
-at 1/S instead of config/testbed.yaml's, with the control values of exp_control.sh --slowdown S.
+beside the best static threshold, Figures 5-1 to 5-6 beside the thesis's numbers and campaign_summary.json (k-NN
+accuracy with <= 40 rows per task against the noise-aware oracle, regret against the a-priori rules, the best
+hindsight threshold, the crossings; a value the rows cannot give is null and the page says why), in
+docs/results/campaign/ (or DIR; with --slowdown S: docs/results/campaign_slowdown<S>/); the sessions' logs and the
+training set in bench_results/campaign[_slowdown<S>]/ (without it the analysis reads DIR/training_set.tsv). Needs
+the control values (exp_control.sh) and root; uses the default testbed. Rows are appended as measured; run it again
+to resume. About 66 s per condition. --slowdown S: the robot's CPU capped at 1/S instead of config/testbed.yaml's,
+with the control values of exp_control.sh --slowdown S.
 --analyse-only: the analysis and figures of the rows so far (--exclude: conditions left out, named on the page).
 """
 

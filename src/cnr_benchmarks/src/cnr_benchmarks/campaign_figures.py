@@ -1,7 +1,8 @@
 """The campaign's analysis: oracle accuracy, learning curve and Figures 5-1 to 5-6 beside the thesis's numbers
 (``campaign analyse``; cnr_benchmarks.core.campaign has the computations), one function per figure and table.
-Writes into ``--out``: learning_curve.tsv, learning_curve_paired.tsv, fig5_1_decision_map.png ... fig5_6_time.png
-and the page README.md; and the local-vs-remote page (``local_remote``)."""
+Writes into ``--out``: learning_curve.tsv, learning_curve_paired.tsv, fig5_1_decision_map.png ... fig5_6_time.png,
+campaign_summary.json (the learned decision's measures: cnr_benchmarks.core.decision_measures) and the page
+README.md; and the local-vs-remote page (``local_remote``)."""
 from __future__ import annotations
 
 import argparse
@@ -20,9 +21,12 @@ import numpy as np  # noqa: E402
 
 from cnr_benchmarks import report, results  # noqa: E402
 from cnr_benchmarks.core import campaign as core  # noqa: E402
+from cnr_benchmarks.core import decision_measures as dm  # noqa: E402
 from cnr_benchmarks.session import slowdown_dir  # noqa: E402
 
 COMMAND_FILE = 'command.txt'        # in the campaign's folder: the command that made its rows
+TRAINING_FILE = 'training_set.tsv'  # in the campaign's page folder: the robot's learned set, published
+SUMMARY_FILE = 'campaign_summary.json'
 
 
 def _num(row: Dict[str, str], key: str) -> float:
@@ -82,6 +86,7 @@ class Analysis:
     n_test: int
     curve: List[Dict]                   # learning curve of the rows learned during the training conditions
     curve_p: List[Dict]                 # the same with one row per training pair, labelled by its oracle
+    train_rows: List[Any]               # the rows learned during the training conditions, in order
 
     @property
     def offload_rows(self) -> List[Dict[str, str]]:
@@ -107,7 +112,7 @@ def load_analysis(args: argparse.Namespace) -> Union[Analysis, int]:
     from cnr_params import ConfigError
     from network_monitor.core.decision_config import load_decision_config
     from network_monitor.core.evaluation import load_control_values
-    from network_monitor.core.training import TrainingSet
+    from network_monitor.core.training import TrainingSet, read_rows
     rows_path = os.path.join(args.out, 'results.tsv')
     rows, warnings = read_results(rows_path)
     for w in warnings:
@@ -127,7 +132,9 @@ def load_analysis(args: argparse.Namespace) -> Union[Analysis, int]:
     except ConfigError as exc:
         print(f'campaign analyse: {exc}', file=sys.stderr)
         return 2
-    training, tw = TrainingSet(os.path.join(args.scratch, 'training'), args.task, args.location).read()
+    path = TrainingSet(os.path.join(args.scratch, 'training'), args.task, args.location).path
+    published = os.path.join(args.out, TRAINING_FILE)           # without the scratch: the copy beside the rows
+    training, tw = read_rows(published if not os.path.exists(path) and os.path.exists(published) else path)
     pairs = core.pairs(rows, cfg.decision.k)
     oracle = [core.oracle(p, control) for p in pairs]
     tolerance = core.noise_tolerance(control)
@@ -147,7 +154,7 @@ def load_analysis(args: argparse.Namespace) -> Union[Analysis, int]:
     paired = core.paired_rows(pairs[:n_train], oracle[:n_train])
     curve_p = _learning_curve(paired, n_train, pairs, oracle, oracle_noise, cfg.decision)
     return Analysis(args, rows, all_rows, excluded, cfg.decision, control, learned, tw, pairs, oracle, oracle_noise,
-                    tolerance, n_train, n_test, curve, curve_p)
+                    tolerance, n_train, n_test, curve, curve_p, train_rows)
 
 
 def _learning_curve(train_rows: Sequence, n_train: int, pairs: Sequence, oracle: Sequence[str],
@@ -442,6 +449,84 @@ def thesis_table(a: Analysis, crossings: Crossings, good: Sequence[Any]) -> List
         f'| Fig. 5-6: task time, remote − local | −2.4 s | {_fmt(dt)} s |']
 
 
+# campaign_summary.json's keys beside the thesis's figures and the goals (key -> (thesis / goal, unit))
+SUMMARY_BESIDE = {
+    'offload_better_share': ('goal 25–75 % of the conditions', '%'),
+    'tasks': ('goal ≥ 2 tasks whose boundaries differ', ''),
+    'training_conditions': ('goal ≥ 100 over all tasks', ''),
+    'knn_noise_aware_accuracy_40': ('goal ≥ 90 % with ≤ 40 rows per task; Eom et al. 87.5 %', '%'),
+    'regret_knn': ('goal ≤ 1/3 of the best a-priori rule\'s', ''),
+    'regret_best_a_priori': ('–', ''),
+    'best_a_priori_rule': ('always onload, always offload, the cold-start rule, offload iff RTT < 50 ms', ''),
+    'knn_minus_best_single_threshold_pts': ('goal ≥ 11 points (MALMOS +10.9–40.5)', ' points'),
+    'crossing_rbw': ('≈ 4.9 (Fig. 5-2)', ''),
+    'crossing_rbw_with_migration': ('≈ 10 (Fig. 5-2, 5 s migration)', ''),
+    'crossing_rtt_ms': ('≈ 55 ms (Fig. 5-4)', ' ms'),
+    'move_base_fails_rtt_ms': ('≈ 160 ms', ' ms'),
+    'good_link_time_change_pct': ('−2.7 % (−2.4 s of 88 s, Fig. 5-6)', ' %'),
+    'good_link_battery_change_pct': ('−10 % (Fig. 5-5)', ' %'),
+    'hours': ('budget ≤ 4 h', ' h')}
+
+
+def decision_measures(a: Analysis, crossings: Crossings, good: Sequence[Any]) -> dm.Measures:
+    """The learned decision's measures (cnr_benchmarks.core.decision_measures) of the analysis: every task of the
+    rows with control values, the robot's rows of the training conditions, the figures' numbers."""
+    from cnr_params import ConfigError
+    from network_monitor.core.evaluation import load_control_values
+    ts = dm.trials(a.rows, a.args.task)
+    controls = {a.args.task: a.control}
+    for task in dm.tasks_of(ts):
+        if task not in controls:
+            try:
+                controls[task] = load_control_values(a.args.control_values, task)
+            except ConfigError as exc:
+                print(f'campaign analyse: {exc}: its conditions left out of {SUMMARY_FILE}', file=sys.stderr)
+    elapsed = core.elapsed_time(a.all_rows)
+    figures = dm.Figures(crossings.r_bw, crossings.r_bw_with_migration, crossings.rtt, crossings.fail_rtt,
+                         dm.change_pct([p.onload.t_task for p in good], [p.offload.t_task for p in good]),
+                         dm.change_pct([p.onload.b_task for p in good], [p.offload.b_task for p in good]),
+                         elapsed / 3600.0 if elapsed > 0 else math.nan)
+    return dm.measures(ts, controls, a.train_rows, a.decision, a.args.test_fraction, figures)
+
+
+def summary_table(m: dm.Measures) -> List[str]:
+    """campaign_summary.json as a table beside the thesis's figures and the goals (a missing value with its
+    reason), and its ``per_task`` as a table."""
+    def shown(key: str) -> str:
+        v, unit = m.summary[key], SUMMARY_BESIDE[key][1]
+        if v is None:
+            return f'– ({m.why_null[key]})'
+        if isinstance(v, list):
+            return f'{len(v)}: {", ".join(v)}'
+        if isinstance(v, (str, int)):
+            return str(v)
+        return f'{100 * v:.1f} %' if unit == '%' else f'{v:.3g}{unit}'
+
+    def num(v: Optional[float], scale: float = 1.0, digits: int = 3) -> str:
+        return '–' if v is None else _fmt(scale * v, digits)
+
+    def threshold(t: Dict) -> str:
+        th = t['best_threshold']
+        return (f'RTT < {num(th["rtt_ms"], digits=0)} ms' + ('' if th['r_bw'] is None else f', R_bw > '
+                                                            f'{num(th["r_bw"], digits=2)}')
+                + f': {num(th["accuracy"], 100, 0)} %')
+    per_task = [f'| {task} | {t["conditions"]} ({t["training_conditions"]} / {t["held_out"]}) | '
+                f'{t["offload_better"]} / {t["offload_beyond_noise"]} | '
+                f'{num(t["knn_noise_aware_accuracy_40"], 100, 0)} % ({t["knn_rows"]} rows) | '
+                f'{num(t["regret_knn"])} | {t["best_a_priori_rule"] or "–"} '
+                f'({num(t["regret_a_priori"].get(t["best_a_priori_rule"]))}) | {threshold(t)} |'
+                for task, t in m.summary['per_task'].items()]
+    return [f'Summary (`{SUMMARY_FILE}`; held-out conditions; the noise-aware oracle from the repeats or, with one '
+            f'run per placement, the control runs\' spread; regret: Eq. 4-5 value above the oracle\'s, a run that '
+            f'did not complete counted as the task redone in the other placement plus one control task; '
+            f'cnr_benchmarks.core.decision_measures):', '',
+            '| key | thesis / goal | measured |', '|---|---|---|',
+            *[f'| `{k}` | {SUMMARY_BESIDE[k][0]} | {shown(k)} |' for k in SUMMARY_BESIDE], '',
+            '| task (`per_task`) | conditions (training / held out) | offload better: strict / beyond the noise | '
+            'k-NN, noise-aware | regret k-NN | best a-priori rule (regret) | its own hindsight threshold |',
+            '|---|---|---|---|---|---|---|', *per_task]
+
+
 def curve_text(title: str, curve: Sequence[Dict]) -> str:
     return f'{title}: ' + ', '.join(
         f'{c["rows"]} rows: k-NN {100 * c["knn"]:.0f} % / static {100 * c["static"]:.0f} % (noise-aware '
@@ -460,7 +545,10 @@ def write_analysis(args: argparse.Namespace) -> int:
     good = good_link_pairs(a)
     figures.update(figs_local_vs_remote(good))
     crossings = Crossings(cross, cross_mig, migration_time, cross_rtt, fail_rtt)
+    measures = decision_measures(a, crossings, good)
+    results.save_json(os.path.join(args.out, SUMMARY_FILE), measures.summary)
     lines = [summary_text(a), *accuracy_table(a), '', *thesis_table(a, crossings, good), '',
+             *summary_table(measures), '',
              curve_text('Learning curve (learning_curve.tsv)', a.curve), '',
              curve_text('Learning curve, paired labels (learning_curve_paired.tsv)', a.curve_p), '',
              'Figures: fig5_1_decision_map.png, fig5_2_time_vs_rbw.png, fig5_3_operating_time.png, '

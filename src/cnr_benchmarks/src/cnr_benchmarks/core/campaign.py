@@ -34,6 +34,8 @@ import statistics
 from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Tuple
 
+import numpy as np
+
 from network_monitor.core.decision import DecisionSettings, Decider, Exploration
 from network_monitor.core.evaluation import (COMPLETED, OFFLOAD, ONLOAD, ControlValues, Outcome, better_placement,
                                              evaluation_value)
@@ -237,19 +239,36 @@ def strict_ceiling(noise_labels: Sequence[str]) -> float:
     return (n - 0.5 * sum(1 for o in noise_labels if o == EITHER)) / n if n else math.nan
 
 
+@dataclass(frozen=True)
+class Threshold:
+    rtt: float                  # s: offload only below
+    r_bw: float                 # offload only above
+    accuracy: float             # the share of the labels it agrees with
+
+
+def best_threshold(c_l: Sequence[float], r_bw: Sequence[float], labels: Sequence[str]) -> Threshold:
+    """The rule "offload iff C_l < a and R_bw > b" (:func:`static_rule`) that agrees with the most ``labels``
+    (:func:`agrees`: EITHER with any), over every observed value; never offloading (a = 0, b = inf) first, and of
+    equally good rules the first found (a, then b, ascending)."""
+    x, y = np.asarray(c_l, dtype=float), np.asarray(r_bw, dtype=float)
+    lab = np.asarray(labels, dtype=object)
+    want_off, want_on = lab != ONLOAD, lab != OFFLOAD            # where offloading / onloading is right
+    best, best_ok = (0.0, math.inf), int(want_on.sum())
+    a_values = np.unique(x[np.isfinite(x)]) + 1e-9
+    b_values = np.concatenate([[-math.inf], np.unique(y[np.isfinite(y)])])
+    for a in a_values:
+        below = x < a
+        for b in b_values:
+            ok = int(np.sum(np.where(below & (y > b), want_off, want_on)))
+            if ok > best_ok:
+                best, best_ok = (float(a), float(b)), ok
+    return Threshold(best[0], best[1], best_ok / len(lab) if len(lab) else math.nan)
+
+
 def static_rule_fit(rows: Sequence[Row]) -> Tuple[float, float]:
     """The best rule "offload iff C_l < a and R_bw > b" on the rows' labels: (a, b); (0, inf) = never offload."""
-    best, best_ok = (0.0, math.inf), sum(1 for r in rows if r.label == ONLOAD)
-    rtts = sorted({r.c_l for r in rows})
-    rbws = sorted({r.r_bw for r in rows})
-    a_values = [x + 1e-9 for x in rtts]
-    b_values = [-math.inf] + [x for x in rbws]
-    for a in a_values:
-        for b in b_values:
-            ok = sum(1 for r in rows if (r.c_l < a and r.r_bw > b) == (r.label == OFFLOAD))
-            if ok > best_ok:
-                best, best_ok = (a, b), ok
-    return best
+    t = best_threshold([r.c_l for r in rows], [r.r_bw for r in rows], [r.label for r in rows])
+    return t.rtt, t.r_bw
 
 
 def static_rule(a: float, b: float, c_l: float, r_bw: float) -> str:
