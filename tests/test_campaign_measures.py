@@ -2,6 +2,7 @@
 campaign's analysis, on small synthetic tables whose answers are known. ROS-free: no master."""
 import ast
 import csv
+import dataclasses
 import json
 import math
 import os
@@ -298,3 +299,15 @@ def test_the_analysis_writes_campaign_summary_json_and_its_table(tmp_path, monke
     assert '| `crossing_rbw` | ≈ 4.9 (Fig. 5-2) |' in page
     assert '| corridor_round_trip | 10 (7 / 3) |' in page
     assert list(campaign_figures.SUMMARY_BESIDE) == list(dm.SUMMARY_KEYS)      # every key beside the thesis
+
+
+def test_rows_learned_during_the_runs_of_each_task():
+    from cnr_benchmarks.campaign_figures import learned_during
+    runs = [dict(condition='c1', wall_start='100', wall_time='40'),
+            dict(condition='c1', wall_start='100', wall_time='40', task='patrol'),
+            dict(condition='c2', wall_start='200', wall_time='40')]
+    learned = [dataclasses.replace(_training_row(0.02, 50, OFFLOAD, task), timestamp=t)
+               for task, t in (('corridor_round_trip', 120), ('corridor_round_trip', 240.5),
+                               ('corridor_round_trip', 300), ('patrol', 130))]
+    got = learned_during(learned, runs, {('corridor_round_trip', 'c2'), ('patrol', 'c1')}, 'corridor_round_trip')
+    assert got == [learned[1], learned[3]]      # c2's row half a second after its end counts; c1's is not a key

@@ -11,7 +11,7 @@ import os
 import statistics
 import sys
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Set, Tuple, Union
 
 import matplotlib
 
@@ -86,7 +86,6 @@ class Analysis:
     n_test: int
     curve: List[Dict]                   # learning curve of the rows learned during the training conditions
     curve_p: List[Dict]                 # the same with one row per training pair, labelled by its oracle
-    train_rows: List[Any]               # the rows learned during the training conditions, in order
 
     @property
     def offload_rows(self) -> List[Dict[str, str]]:
@@ -112,7 +111,6 @@ def load_analysis(args: argparse.Namespace) -> Union[Analysis, int]:
     from cnr_params import ConfigError
     from network_monitor.core.decision_config import load_decision_config
     from network_monitor.core.evaluation import load_control_values
-    from network_monitor.core.training import TrainingSet, read_rows
     rows_path = os.path.join(args.out, 'results.tsv')
     rows, warnings = read_results(rows_path)
     for w in warnings:
@@ -132,29 +130,44 @@ def load_analysis(args: argparse.Namespace) -> Union[Analysis, int]:
     except ConfigError as exc:
         print(f'campaign analyse: {exc}', file=sys.stderr)
         return 2
-    path = TrainingSet(os.path.join(args.scratch, 'training'), args.task, args.location).path
-    published = os.path.join(args.out, TRAINING_FILE)           # without the scratch: the copy beside the rows
-    training, tw = read_rows(published if not os.path.exists(path) and os.path.exists(published) else path)
+    training, tw = read_training(args, args.task)
     pairs = core.pairs(rows, cfg.decision.k)
     oracle = [core.oracle(p, control) for p in pairs]
     tolerance = core.noise_tolerance(control)
     oracle_noise = [core.oracle(p, control, tolerance) for p in pairs]
     n_test = int(round(len(pairs) * args.test_fraction))
     n_train = len(pairs) - n_test
-    train_ids = {p.condition for p in pairs[:n_train]}
-    # the rows learned during the training conditions: each row's timestamp falls in its run's wall-clock span
-    spans = [(_num(r, 'wall_start'), _num(r, 'wall_start') + _num(r, 'wall_time'), r['condition']) for r in rows]
-
-    def condition_of(t: float) -> str:
-        return next((c for a, b, c in spans if a <= t <= b + 1.0), '')
     learned = [t for t in training if t.source == 'local']
-    train_rows = [t for t in learned if condition_of(t.timestamp) in train_ids]
+    train_rows = learned_during(learned, rows, {(args.task, p.condition) for p in pairs[:n_train]}, args.task)
     curve = _learning_curve(train_rows, n_train, pairs, oracle, oracle_noise, cfg.decision)
     # the same with one row per training pair labelled by the pair's (strict) oracle (core.paired_rows)
     paired = core.paired_rows(pairs[:n_train], oracle[:n_train])
     curve_p = _learning_curve(paired, n_train, pairs, oracle, oracle_noise, cfg.decision)
     return Analysis(args, rows, all_rows, excluded, cfg.decision, control, learned, tw, pairs, oracle, oracle_noise,
-                    tolerance, n_train, n_test, curve, curve_p, train_rows)
+                    tolerance, n_train, n_test, curve, curve_p)
+
+
+def read_training(args: argparse.Namespace, task: str) -> Tuple[List[Any], List[str]]:
+    """The robot's training set of ⟨task, --location⟩ in the scratch (``<scratch>/training``), or without it the one
+    published beside the rows (``<out>/training_set.tsv``, the campaign's own task only): rows and warnings."""
+    from network_monitor.core.training import TrainingSet, read_rows
+    path = TrainingSet(os.path.join(args.scratch, 'training'), task, args.location).path
+    published = os.path.join(args.out, TRAINING_FILE)
+    if not os.path.exists(path) and task == args.task and os.path.exists(published):
+        path = published
+    return read_rows(path)
+
+
+def learned_during(learned: Sequence[Any], rows: Sequence[Dict[str, str]], keys: Set[Tuple[str, str]],
+                   default_task: str) -> List[Any]:
+    """The training rows learned during the runs of the ⟨task, condition⟩s ``keys``, in order: each row's timestamp
+    falls in its run's wall-clock span (a result row's task is its ``task`` field, ``default_task`` without one)."""
+    spans = [(_num(r, 'wall_start'), _num(r, 'wall_start') + _num(r, 'wall_time'),
+              (r.get('task') or default_task, r['condition'])) for r in rows]
+
+    def run_of(t: Any) -> Tuple[str, str]:
+        return next((key for a, b, key in spans if a <= t.timestamp <= b + 1.0 and key[0] == t.task), ('', ''))
+    return [t for t in learned if run_of(t) in keys]
 
 
 def _learning_curve(train_rows: Sequence, n_train: int, pairs: Sequence, oracle: Sequence[str],
@@ -475,18 +488,23 @@ def decision_measures(a: Analysis, crossings: Crossings, good: Sequence[Any]) ->
     from network_monitor.core.evaluation import load_control_values
     ts = dm.trials(a.rows, a.args.task)
     controls = {a.args.task: a.control}
+    learned = list(a.learned)
     for task in dm.tasks_of(ts):
         if task not in controls:
             try:
                 controls[task] = load_control_values(a.args.control_values, task)
             except ConfigError as exc:
                 print(f'campaign analyse: {exc}: its conditions left out of {SUMMARY_FILE}', file=sys.stderr)
+                continue
+            learned += [t for t in read_training(a.args, task)[0] if t.source == 'local']
+    train = dm.split(ts, a.args.test_fraction)[0]
+    train_rows = learned_during(learned, a.rows, {(t.task, t.condition) for t in train}, a.args.task)
     elapsed = core.elapsed_time(a.all_rows)
     figures = dm.Figures(crossings.r_bw, crossings.r_bw_with_migration, crossings.rtt, crossings.fail_rtt,
                          dm.change_pct([p.onload.t_task for p in good], [p.offload.t_task for p in good]),
                          dm.change_pct([p.onload.b_task for p in good], [p.offload.b_task for p in good]),
                          elapsed / 3600.0 if elapsed > 0 else math.nan)
-    return dm.measures(ts, controls, a.train_rows, a.decision, a.args.test_fraction, figures)
+    return dm.measures(ts, controls, train_rows, a.decision, a.args.test_fraction, figures)
 
 
 def summary_table(m: dm.Measures) -> List[str]:
