@@ -26,6 +26,13 @@ Thresholds. "Offload iff C_l < a and R_bw > b" (core.campaign.static_rule) fitte
 trials' noise-aware labels: the best single pair for all tasks alike, and per task. The k-NN is the robot's own
 (network_monitor.core.decision.Decider, no exploration) trained on at most ``max_rows`` of the task's training rows,
 the first ones as the robot learned them.
+
+Summary (:data:`SUMMARY_KEYS`, :func:`measures`): ``offload_better_share`` is the strict oracle's share of all the
+trials; ``knn_noise_aware_accuracy_40`` the k-NN's agreement with the noise-aware oracle over every task's held-out
+trials (per task under ``per_task``, with the task's a-priori regrets and its own hindsight threshold);
+``knn_minus_best_single_threshold_pts`` that accuracy minus the single hindsight threshold's, in points; the
+crossings, the good-link changes and the hours are the analysis's (:class:`Figures`). A value the trials cannot
+give is None (JSON null), with a one-line reason in ``Measures.why_null``.
 """
 from __future__ import annotations
 
@@ -247,47 +254,51 @@ def _mean(v: Sequence[float]) -> float:
 def measures(ts: Sequence[Trial], controls: Mapping[str, ControlValues], training_rows: Sequence[Row],
              settings: DecisionSettings, test_fraction: float, figures: Figures,
              max_rows: int = MAX_ROWS) -> Measures:
-    """The measures of a campaign's trials (module docstring). ``controls``: each task's control values;
-    ``training_rows``: the rows learned during the training conditions, in the order learned (each row's ``task``
-    says whose); ``figures``: the thesis figures' numbers of the analysis."""
+    """The measures of a campaign's trials (module docstring). ``controls``: each task's control values (a task
+    without is left out); ``training_rows``: the rows learned during the training conditions, in the order learned
+    (each row's ``task`` says whose); ``figures``: the thesis figures' numbers of the analysis."""
     ts = [t for t in ts if t.task in controls]
     train, held = split(ts, test_fraction)
-    strict = {id(t): trial_oracle(t, controls[t.task], noise_aware=False) for t in ts}
-    noise = {id(t): trial_oracle(t, controls[t.task]) for t in ts}
-    rules = a_priori_rules(settings)
-    per_task: Dict[str, TaskMeasures] = {}
-    knn_choice: Dict[int, str] = {}
+    strict = [trial_oracle(t, controls[t.task], noise_aware=False) for t in ts]
+    noise = {(t.task, t.condition): trial_oracle(t, controls[t.task]) for t in ts}
+    policies: Dict[str, Policy] = {}            # task -> its k-NN
+    knn_rows: Dict[str, int] = {}
     for task in tasks_of(ts):
         rows = [r for r in training_rows if r.task == task][:max_rows]
-        knn = knn_policy(settings, rows)
-        mine = [t for t in held if t.task == task]
-        labels = [noise[id(t)] for t in mine]
-        control = controls[task]
-        for t in mine:
-            knn_choice[id(t)] = knn(t)
+        policies[task], knn_rows[task] = knn_policy(settings, rows), len(rows)
+    rules = a_priori_rules(settings)
+
+    def label(t: Trial) -> str:
+        return noise[(t.task, t.condition)]
+
+    def knn(t: Trial) -> str:
+        return policies[t.task](t)
+
+    def mean_regret(policy: Policy, of: Sequence[Trial]) -> float:
+        return _mean([regret(t, policy(t), label(t), controls[t.task]) for t in of])
+
+    def hindsight(of: Sequence[Trial]) -> Threshold:
+        return best_threshold([t.c_l for t in of], [t.r_bw for t in of], [label(t) for t in of])
+
+    per_task = {}
+    for task in tasks_of(ts):
+        mine, everything = [t for t in held if t.task == task], [t for t in ts if t.task == task]
         per_task[task] = TaskMeasures(
-            task=task, conditions=sum(t.task == task for t in ts),
-            training_conditions=sum(t.task == task for t in train), held_out=len(mine),
-            offload_better=sum(strict[id(t)] == OFFLOAD for t in ts if t.task == task),
-            offload_beyond_noise=sum(noise[id(t)] == OFFLOAD for t in ts if t.task == task), knn_rows=len(rows),
-            knn_accuracy=accuracy([knn_choice[id(t)] for t in mine], labels),
-            regret_knn=_mean([regret(t, knn_choice[id(t)], o, control) for t, o in zip(mine, labels)]),
-            regret_rules={name: _mean([regret(t, rule(t), o, control) for t, o in zip(mine, labels)])
-                          for name, rule in rules.items()},
-            threshold=best_threshold([t.c_l for t in mine], [t.r_bw for t in mine], labels))
-    labels = [noise[id(t)] for t in held]
-    knn_acc = accuracy([knn_choice[id(t)] for t in held], labels)
-    regret_knn = _mean([regret(t, knn_choice[id(t)], o, controls[t.task]) for t, o in zip(held, labels)])
-    rule_regret = {name: _mean([regret(t, rule(t), o, controls[t.task]) for t, o in zip(held, labels)])
-                   for name, rule in rules.items()}
+            task=task, conditions=len(everything), training_conditions=sum(t.task == task for t in train),
+            held_out=len(mine), offload_better=sum(o == OFFLOAD for t, o in zip(ts, strict) if t.task == task),
+            offload_beyond_noise=sum(label(t) == OFFLOAD for t in everything), knn_rows=knn_rows[task],
+            knn_accuracy=accuracy([knn(t) for t in mine], [label(t) for t in mine]),
+            regret_knn=mean_regret(knn, mine),
+            regret_rules={name: mean_regret(rule, mine) for name, rule in rules.items()}, threshold=hindsight(mine))
+    knn_acc = accuracy([knn(t) for t in held], [label(t) for t in held])
+    rule_regret = {name: mean_regret(rule, held) for name, rule in rules.items()}
     best_rule = min(rule_regret, key=rule_regret.get) if held else None
-    single = best_threshold([t.c_l for t in held], [t.r_bw for t in held], labels)
     summary = dict(
-        offload_better_share=_num(sum(v == OFFLOAD for v in strict.values()) / len(ts) if ts else math.nan),
+        offload_better_share=_num(strict.count(OFFLOAD) / len(ts) if ts else math.nan),
         tasks=tasks_of(ts), training_conditions=len(train), knn_noise_aware_accuracy_40=_num(knn_acc),
-        regret_knn=_num(regret_knn), regret_best_a_priori=_num(rule_regret[best_rule]) if best_rule else None,
-        best_a_priori_rule=best_rule,
-        knn_minus_best_single_threshold_pts=_num(100.0 * (knn_acc - single.accuracy)),
+        regret_knn=_num(mean_regret(knn, held)),
+        regret_best_a_priori=_num(rule_regret[best_rule]) if best_rule else None, best_a_priori_rule=best_rule,
+        knn_minus_best_single_threshold_pts=_num(100.0 * (knn_acc - hindsight(held).accuracy)),
         crossing_rbw=_num(figures.crossing_rbw), crossing_rbw_with_migration=_num(figures.crossing_rbw_with_migration),
         crossing_rtt_ms=_num(figures.crossing_rtt_ms), move_base_fails_rtt_ms=_num(figures.move_base_fails_rtt_ms),
         good_link_time_change_pct=_num(figures.good_link_time_change_pct),
@@ -301,7 +312,7 @@ def measures(ts: Sequence[Trial], controls: Mapping[str, ControlValues], trainin
         crossing_rbw='the power fit of the completed offloaded runs\' T_task over R_bw does not reach CT within the '
                      'measured R_bw (Fig. 5-2)',
         crossing_rbw_with_migration='the same fit does not reach CT minus the median placing time within the '
-                                    'measured R_bw (Fig. 5-2)',
+                                    'measured R_bw, or no placing time was measured (Fig. 5-2)',
         crossing_rtt_ms='the linear fit of the completed offloaded runs\' T_task over RTT does not reach CT within '
                         'the measured RTTs (Fig. 5-4)',
         move_base_fails_rtt_ms='no RTT bin (20 ms) from which on most offloaded runs did not complete',
