@@ -217,11 +217,11 @@ def test_battery_reacts_to_motion_cpu_and_radio():
         working.step(0.02, 0.0, 0.0, 0.0, 0.0)
     working.add_work(cpu_seconds=2.0, bytes_transferred=10e6, interval=10.0)
     assert idle.energy.total == pytest.approx((cfg.base_idle_power + cfg.laptop_idle_power) * 10.0)
-    assert moving.energy.motors > 0 and moving.percentage < idle.percentage
+    assert moving.energy.motors > 0 and moving.base.percentage < idle.base.percentage
     assert working.energy.cpu == pytest.approx(2.0 * cfg.cpu_full_load_power / cfg.cpu_capacity)
     assert working.energy.radio == pytest.approx(10e6 * cfg.radio_joules_per_byte)
-    assert working.percentage < idle.percentage
-    assert 13.2 <= idle.voltage <= 16.5
+    assert working.computer.percentage < idle.computer.percentage
+    assert 13.2 <= idle.base.voltage <= 16.5 and 9.0 <= idle.computer.voltage <= 12.6
 
 
 def test_a_capped_robot_pays_the_full_load_power_for_its_limit():
@@ -239,7 +239,8 @@ def test_a_capped_robot_pays_the_full_load_power_for_its_limit():
 def test_battery_config_from_repository_file(workspace):
     sec = Section.from_file(f'{workspace}/config/battery.yaml').section('battery')
     cfg = BatteryConfig.from_section(sec)
-    assert cfg.capacity_ah == 2.2 and cfg.nominal_voltage == 14.8
+    assert cfg.base_pack.capacity_ah == 2.2 and cfg.base_pack.nominal_voltage == 14.8
+    assert cfg.computer_pack.capacity_ah == 5.2 and cfg.computer_pack.nominal_voltage == 10.8
     with pytest.raises(ConfigError):
         BatteryConfig.from_section(Section({'capacity_ah': -1.0}, 'battery.yaml'))
     del sec.data['mass']

@@ -23,7 +23,7 @@ import cnr_params
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.mapio import load_map
 from cnr_maps.measurements import Measurement, write_tsv
-from cnr_mission.core.report import CellSummary, check_store, path_length, render_png, write_summary
+from cnr_mission.core.report import CellSummary, check_store, pack_used, path_length, render_png, write_summary
 from cnr_mission.core.scenario import read_mission
 from cnr_mission.core.timeline import write_timeline
 from cnr_mission.core.task import COMPLETED, TIMED_OUT, battery_used
@@ -65,6 +65,7 @@ class MissionMonitor:
         self.battery_first: Optional[BatteryState] = None
         self.battery_last: Optional[BatteryState] = None
         self.battery_at_hotspot: Optional[BatteryState] = None     # the first reading from the hotspot's time on
+        self.computer_battery: List[Optional[BatteryState]] = [None, None]   # the robot computer's pack: first, last
         self.energy_first: Optional[BatteryEnergy] = None
         self.energy_last: Optional[BatteryEnergy] = None
         self.cells: Optional[CellStates] = None
@@ -77,6 +78,7 @@ class MissionMonitor:
         rospy.Subscriber('base_pose_ground_truth', Odometry, self._on_pose, queue_size=10)
         rospy.Subscriber('battery_state', BatteryState, self._on_battery, queue_size=2)
         rospy.Subscriber('battery/energy', BatteryEnergy, self._on_energy, queue_size=2)
+        rospy.Subscriber('laptop_charge', BatteryState, self._on_computer_battery, queue_size=2)
         rospy.Subscriber('cell_states', CellStates, lambda m: setattr(self, 'cells', m), queue_size=1)
         rospy.Subscriber('hotspot', Hotspot, self._on_hotspot, queue_size=1)
         rospy.Subscriber('merged_measurements', MergedMeasurement, self._on_measurement, queue_size=100)
@@ -136,6 +138,9 @@ class MissionMonitor:
         h = self.hotspot
         if h is not None and self.battery_at_hotspot is None and msg.header.stamp >= h.header.stamp:
             self.battery_at_hotspot = msg
+
+    def _on_computer_battery(self, msg: BatteryState) -> None:
+        self.computer_battery = [self.computer_battery[0] or msg, msg]
 
     def _on_activity(self, msg: MfgActivity) -> None:
         self.activity, self.activity_received = msg, rospy.Time.now().to_sec()
@@ -367,6 +372,8 @@ class MissionMonitor:
             battery_used_percent=None if b0 is None else 100.0 * (b0.percentage - b1.percentage),
             battery_used_ah=None if b0 is None else b0.charge - b1.charge,
             battery_energy=None if b1 is None else b1.serial_number,
+            # battery_used_* and battery_energy: the base's pack (battery_state); the robot computer's (the netbook's):
+            computer_battery=pack_used(*self.computer_battery),
             # energy drawn during the mission per consumer [J]: CPU = the robot's processes (its cgroup on the
             # testbed), radio = bytes on the robot's link interface
             energy=None if self.energy_first is None else {

@@ -5,8 +5,9 @@ migration_decider (see :mod:`cnr_mission.core.task` and the package README).
 Per run: set the link (testbed emulator), put the robot at the task's start (the simulator's ``teleport``),
 ``~decide`` (the modules home, the network monitor's window filled with the new link for ``settle`` s, profile,
 k-NN, placement; or the previous run's profile with ``reuse_profile``), drive the goals with
-move_base's action, measure T_task (sim time) and B_task (battery_state), ``~evaluate``, append the row to
-the results file. A plan that was interrupted resumes after the last run with a row.
+move_base's action, measure T_task (sim time) and B_task (the robot computer's battery, ``battery_topic``; the
+base's, ``base_battery_topic``, recorded beside it as ``b_base``), ``~evaluate``, append the row to the results
+file. A plan that was interrupted resumes after the last run with a row.
 
 Exit status: 0 every run done, 2 bad configuration, 1 anything else.
 """
@@ -26,7 +27,7 @@ from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
 from sensor_msgs.msg import BatteryState
 
 import cnr_params
-from cnr_mission.core.task import (GAVE_UP, SUCCEEDED, TOO_LONG, RunSpec, append_result, battery_used, evaluable,
+from cnr_mission.core.task import (GAVE_UP, SUCCEEDED, TOO_LONG, RunSpec, append_result, battery_fields, evaluable,
                                    load_plan, load_task, mission_status, read_results, resolve_force)
 from cnr_msgs.msg import TaskDecision
 from cnr_msgs.srv import Decide, EvaluateTask, Teleport
@@ -39,6 +40,10 @@ from network_monitor.decider_codes import FORCE, MISSION_STATUS, PLACEMENT_WORD,
 
 FAILED_STATES = (GoalStatus.ABORTED, GoalStatus.REJECTED, GoalStatus.LOST, GoalStatus.RECALLED,
                  GoalStatus.PREEMPTED)
+
+
+def _percentage(msg: Optional[BatteryState]) -> Optional[float]:
+    return None if msg is None else msg.percentage
 
 
 class TaskRunner:
@@ -64,10 +69,12 @@ class TaskRunner:
         self.client = actionlib.SimpleActionClient(action, MoveBaseAction)
         self.last_status = time.monotonic()         # wall time move_base's action status was last heard
         rospy.Subscriber(f'{action}/status', GoalStatusArray, self._on_status, queue_size=2)
-        self.battery: Optional[BatteryState] = None
+        self.battery: Optional[BatteryState] = None          # the robot computer's pack: B_task
+        self.base_battery: Optional[BatteryState] = None     # the base's pack: b_base
         self.link = None                            # the link the previous run set
         self.redecisions: List[TaskDecision] = []
         rospy.Subscriber(p.string('battery_topic'), BatteryState, self._on_battery, queue_size=2)
+        rospy.Subscriber(p.string('base_battery_topic'), BatteryState, self._on_base_battery, queue_size=2)
         rospy.Subscriber(f'{decider}/decisions', TaskDecision, self._on_decision, queue_size=20)
 
     def _on_status(self, _msg: GoalStatusArray) -> None:
@@ -75,6 +82,9 @@ class TaskRunner:
 
     def _on_battery(self, msg: BatteryState) -> None:
         self.battery = msg
+
+    def _on_base_battery(self, msg: BatteryState) -> None:
+        self.base_battery = msg
 
     def _on_decision(self, msg: TaskDecision) -> None:
         if msg.event == TaskDecision.REDECIDED:
@@ -181,14 +191,15 @@ class TaskRunner:
                        placing_time=m.placing_time, placement=m.placement)
         if not wait_for_server(self.client, self.decide_timeout):
             raise RuntimeError('move_base\'s action server is not there')
-        b0 = self.battery
+        b0, base0 = self.battery, self.base_battery
         t0 = rospy.Time.now().to_sec()
         outcomes = self.drive()
         t_task = rospy.Time.now().to_sec() - t0
-        b1 = self.battery
+        b1, base1 = self.battery, self.base_battery
         status = mission_status(outcomes, len(self.spec.goals))
-        b_task = battery_used(None if b0 is None else b0.percentage, None if b1 is None else b1.percentage)
-        row.update(mission_status=status, t_task=t_task, b_task=b_task, redecisions=len(self.redecisions))
+        batteries = battery_fields((_percentage(b0), _percentage(b1)), (_percentage(base0), _percentage(base1)))
+        b_task = batteries['b_task']
+        row.update(mission_status=status, t_task=t_task, redecisions=len(self.redecisions), **batteries)
         if r.decide and not evaluable(b_task):
             # the decider's task is closed (it stops re-deciding) but nothing is labelled or learned from it
             self.evaluate(MISSION_STATUS[status], t_task, 0.0, False)

@@ -1,6 +1,7 @@
 """The ``simulator`` node: ROS I/O around :class:`cnr_sim.core.world.World` (a stage_ros look-alike).
 
-Publishes /clock, odom, base_pose_ground_truth, scan, camera/depth/points, battery_state, obstacles,
+Publishes /clock, odom, base_pose_ground_truth, scan, camera/depth/points, the two battery packs (the base's,
+battery_state, and the robot computer's, laptop_charge, as config/battery.yaml names them), obstacles,
 collision events and tf; subscribes mobile_base/commands/velocity (through the ``~command_fence`` plugin, if
 any: e.g. a managed move_base instance that does not hold the lease is ignored); services reset_positions and
 teleport. Every topic, service and parameter is documented in the package README.
@@ -31,7 +32,7 @@ from cnr_msgs.msg import BatteryEnergy, Collision
 from cnr_msgs.srv import Teleport, TeleportResponse
 from cnr_params.ros import private_section
 from cnr_runtime import init_node
-from cnr_sim.core.battery import BatteryModel, NetMeter, cpu_meter
+from cnr_sim.core.battery import BatteryModel, NetMeter, Pack, cpu_meter
 from cnr_sim.core.depth_camera import POINT_STEP
 from cnr_sim.core import plugins
 from cnr_sim.core.plugins import CommandGate, CpuUsage
@@ -139,7 +140,8 @@ class SimulatorNode:
         self.scan_pub = rospy.Publisher('scan', LaserScan, queue_size=5)
         self.depth_pub = rospy.Publisher('camera/depth/points', PointCloud2, queue_size=2) \
             if params.depth_enabled else None
-        self.battery_pub = rospy.Publisher('battery_state', BatteryState, queue_size=2)
+        self.pack_pubs = [(pack, rospy.Publisher(pack.config.topic, BatteryState, queue_size=2))
+                          for pack in self.battery.packs]
         self.energy_pub = rospy.Publisher('battery/energy', BatteryEnergy, queue_size=2)
         self.collision_pub = rospy.Publisher('mobile_base/events/collision', Collision, queue_size=10)
         self.obstacles_pub = rospy.Publisher('obstacles', PoseArray, queue_size=2)
@@ -277,11 +279,13 @@ class SimulatorNode:
             self.depth_pub.publish(cloud)
         if w.time + 1e-9 >= self._next_battery:
             self._next_battery = w.time + 1.0 / p.battery_rate
-            self.battery_pub.publish(self._battery_msg(stamp))
+            for pack, pub in self.pack_pubs:
+                pub.publish(self._battery_msg(stamp, pack))
             self.energy_pub.publish(self._energy_msg(stamp))
 
-    def _battery_msg(self, stamp) -> BatteryState:
-        b, c = self.battery, self.p.battery
+    @staticmethod
+    def _battery_msg(stamp, b: Pack) -> BatteryState:
+        c = b.config
         m = BatteryState()
         m.header.stamp = stamp
         m.voltage = b.voltage
@@ -294,9 +298,8 @@ class SimulatorNode:
         m.power_supply_health = BatteryState.POWER_SUPPLY_HEALTH_GOOD
         m.power_supply_technology = BatteryState.POWER_SUPPLY_TECHNOLOGY_LION
         m.present = True
-        m.location = 'kobuki'
-        m.serial_number = (f'idle={b.energy.idle:.1f}J motors={b.energy.motors:.1f}J '
-                           f'cpu={b.energy.cpu:.1f}J radio={b.energy.radio:.1f}J')
+        m.location = c.location
+        m.serial_number = ' '.join(f'{k}={v:.1f}J' for k, v in b.breakdown.items())
         return m
 
     def _energy_msg(self, stamp) -> BatteryEnergy:

@@ -4,7 +4,8 @@ Files written into the report folder:
 
 * ``measurements.tsv`` — the stored measurements in the format of :mod:`cnr_maps.measurements`
   (written with its ``write_tsv``);
-* ``summary.json`` — scenario, hotspot, sim time to find it, distance driven, battery used, counts;
+* ``summary.json`` — scenario, hotspot, sim time to find it, distance driven, battery used (the base's pack and
+  the robot computer's, :func:`pack_used`), counts;
 * ``mapcells.png`` — the map with every mapcell coloured by its average temperature, the robot's path and
   the hotspot marked.
 """
@@ -39,6 +40,16 @@ def path_length(points: Sequence[Tuple[float, float]]) -> float:
         return 0.0
     p = np.asarray(points, dtype=float)
     return float(np.sum(np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))))
+
+
+def pack_used(first, last) -> Optional[Dict]:
+    """What a battery pack gave over the mission, from its first and last sensor_msgs/BatteryState (None without
+    a reading): ``used_percent`` [%], ``used_ah`` [Ah] and ``energy`` (J per consumer, the simulator's
+    ``serial_number`` text)."""
+    if first is None or last is None:
+        return None
+    return dict(used_percent=100.0 * (first.percentage - last.percentage), used_ah=first.charge - last.charge,
+                energy=last.serial_number)
 
 
 def write_summary(path: str, summary: Dict) -> None:

@@ -20,6 +20,10 @@ and what to decide (``force``: '' = the migration_decider decides, offload | onl
 training set; ``explore``: the decision may explore; ``reuse_profile``: decide on the previous run's profile,
 e.g. the second run of a pair under the same link). Results are appended to a TSV, one row per run,
 so a plan that was interrupted resumes after its last finished run (:func:`read_results`).
+
+B_task is the robot computer's battery (the netbook's pack, as the thesis read BAT0); ``b_base`` beside it in a
+row is the same fraction of the Kobuki base's pack (recorded, never evaluated). A results file without the
+``b_base`` column (:data:`RESULT_COLUMNS_ONE_PACK`) is read and appended to in its own columns.
 """
 from __future__ import annotations
 
@@ -79,11 +83,18 @@ def mission_status(outcomes: Sequence[str], goals: int) -> str:
 
 def battery_used(percentage_before: Optional[float], percentage_after: Optional[float]) -> float:
     """B_task: the fraction of a full battery used, from two sensor_msgs/BatteryState ``percentage`` readings
-    (ROS: 0..1); NaN when a reading is missing (no battery_state arrived) or not finite — such a run has no B_task
+    (ROS: 0..1); NaN when a reading is missing (no BatteryState arrived) or not finite — such a run has no B_task
     and must not be evaluated or learned (:func:`evaluable`)."""
     if percentage_before is None or percentage_after is None:
         return math.nan
     return percentage_before - percentage_after
+
+
+def battery_fields(computer: Tuple[Optional[float], Optional[float]],
+                   base: Tuple[Optional[float], Optional[float]]) -> Dict[str, float]:
+    """A run's battery columns from the percentages (before, after) of each pack: ``b_task`` (Eq. 4-5) the robot
+    computer's, ``b_base`` the base's (:func:`battery_used`)."""
+    return dict(b_task=battery_used(*computer), b_base=battery_used(*base))
 
 
 def evaluable(b_task: float) -> bool:
@@ -155,8 +166,19 @@ def load_plan(path: str) -> Plan:
 
 RESULT_COLUMNS = ('id', 'condition', 'rtt_ms', 'rate_mbit', 'loss', 'force', 'decision', 'reason', 'policy',
                   'confidence', 'votes_offload', 'c_l', 'r_bw', 'profile_method', 'placed', 'placing_time',
-                  'redecisions', 'placement', 'mission_status', 't_task', 'b_task', 'value', 'good', 'label',
-                  'learned', 'wall_start', 'wall_time')
+                  'redecisions', 'placement', 'mission_status', 't_task', 'b_task', 'b_base', 'value', 'good',
+                  'label', 'learned', 'wall_start', 'wall_time')
+#: the columns of a results file that records one battery pack (no ``b_base``): read with ``b_base`` '',
+#: appended to in these columns
+RESULT_COLUMNS_ONE_PACK = tuple(c for c in RESULT_COLUMNS if c != 'b_base')
+
+
+def _columns(path: str, header: str) -> Tuple[str, ...]:
+    """The columns a results file's header line names (ConfigError if it is not a results file's)."""
+    columns = tuple(header.rstrip('\n').split('\t'))
+    if columns not in (RESULT_COLUMNS, RESULT_COLUMNS_ONE_PACK):
+        raise ConfigError(path, 'header', 'not a task results file (unexpected header)')
+    return columns
 
 
 def _fmt(v) -> str:
@@ -168,38 +190,42 @@ def _fmt(v) -> str:
 
 
 def append_result(path: str, values: Dict) -> None:
-    """Append one run's row to the results TSV (header first if the file is new), flushed to disk. A file that
-    does not end with a newline (a torn last line) gets one first, so only that line is lost."""
+    """Append one run's row to the results TSV (header first if the file is new; an existing file's columns,
+    :func:`_columns`), flushed to disk. A file that does not end with a newline (a torn last line) gets one
+    first, so only that line is lost."""
     new = not os.path.exists(path) or os.path.getsize(path) == 0
+    columns = RESULT_COLUMNS
     with open(path, 'a+b') as f:
         if not new:
+            f.seek(0)
+            columns = _columns(path, f.readline().decode('utf-8', errors='replace'))
             f.seek(-1, os.SEEK_END)
             if f.read(1) != b'\n':
                 f.write(b'\n')
-        text = ('\t'.join(RESULT_COLUMNS) + '\n' if new else '') + \
-            '\t'.join(_fmt(values.get(c, '')) for c in RESULT_COLUMNS) + '\n'
+        text = ('\t'.join(columns) + '\n' if new else '') + \
+            '\t'.join(_fmt(values.get(c, '')) for c in columns) + '\n'
         f.write(text.encode())
         f.flush()
         os.fsync(f.fileno())
 
 
 def read_results(path: str) -> Tuple[List[Dict[str, str]], List[str]]:
-    """Rows of a results TSV as dicts of strings, and warnings (file:line) for lines that are not whole rows."""
+    """Rows of a results TSV as dicts of strings with every column of :data:`RESULT_COLUMNS` (those the file does
+    not have: ''), and warnings (file:line) for lines that are not whole rows."""
     if not os.path.exists(path):
         return [], []
     rows, warnings = [], []
     with open(path, encoding='utf-8', errors='replace') as f:
         lines = f.read().split('\n')
-    if not lines or lines[0].split('\t') != list(RESULT_COLUMNS):
-        raise ConfigError(path, 'header', 'not a task results file (unexpected header)')
+    columns = _columns(path, lines[0])
     for n, line in enumerate(lines[1:], start=2):
         if not line:
             continue
         fields = line.split('\t')
-        if len(fields) != len(RESULT_COLUMNS):
-            warnings.append(f'{path}:{n}: {len(fields)} fields, expected {len(RESULT_COLUMNS)} (skipped)')
+        if len(fields) != len(columns):
+            warnings.append(f'{path}:{n}: {len(fields)} fields, expected {len(columns)} (skipped)')
             continue
-        rows.append(dict(zip(RESULT_COLUMNS, fields)))
+        rows.append(dict(dict.fromkeys(RESULT_COLUMNS, ''), **dict(zip(columns, fields))))
     return rows, warnings
 
 

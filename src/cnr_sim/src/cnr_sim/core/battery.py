@@ -1,9 +1,12 @@
-"""Battery of the TurtleBot 2 with a drain model whose inputs are measured.
+"""Batteries of the TurtleBot 2 with a drain model whose inputs are measured.
 
-ROS-free. Power drawn from the 14.8 V Li-ion pack [W]:
+ROS-free. Two packs, as on the real robot: the Kobuki base's (14.8 V Li-ion) feeds the base, the robot
+computer's (the netbook's own battery, BAT0) feeds the computer. Power drawn [W]:
 
-    P = P_base_idle + P_laptop_idle                                 (constant, from config)
-      + (m g c_rr |v| + m |a v| + I |alpha w| + c_turn |w|) / eta     (motors, from the simulated motion)
+    base pack:      P_base_idle                                           (constant, from config)
+                  + (m g c_rr |v| + m |a v| + I |alpha w| + c_turn |w|) / eta   (motors, from the simulated motion)
+    computer pack:  P_laptop_idle                                         (constant, from config)
+                  + E_cpu, E_radio as measured (below)
     E_cpu   = P_cpu / capacity * (CPU seconds actually used by the robot's computer: the processes of its cgroup,
                         read from the cgroup's accounting, or else the robot's processes, measured with psutil)
               P_cpu: the robot CPU's power above idle at full load [W]; capacity: the CPUs of this machine
@@ -12,16 +15,17 @@ ROS-free. Power drawn from the 14.8 V Li-ion pack [W]:
     E_radio = e_byte * (bytes actually sent + received on the robot's interface, measured with psutil in the
                         caller's network namespace)
 
-Energy integrates over sim time for the first two terms; the CPU and radio terms are energy for work
-that really happened, so they do not depend on the real-time factor. State of charge drops by
-E / V_nominal; the reported voltage follows Kobuki's linear mapping between 13.2 V (empty) and
-16.5 V (full) (kobuki_driver battery.cpp: % = 95 (V - 13.2) / (16.5 - 13.2) + 5).
+Energy integrates over sim time for the idle and motor terms; the CPU and radio terms are energy for work
+that really happened, so they do not depend on the real-time factor. Each pack's state of charge drops by
+the energy of its consumers over its own capacity (Ah x V_nominal); its reported voltage is linear in the
+state of charge between ``empty_voltage`` (at ``percentage_at_empty_voltage``) and ``full_voltage`` (100 %):
+for the Kobuki kobuki_driver's mapping (battery.cpp: % = 95 (V - 13.2) / (16.5 - 13.2) + 5).
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Dict, Iterable, Optional, Set, Union
+from typing import Callable, Dict, Iterable, Optional, Set, Tuple, Union
 
 from cnr_params import Section
 
@@ -29,16 +33,47 @@ from cnr_sim.core.plugins import CpuUsage
 
 GRAVITY = 9.81  # m/s^2
 
+#: the consumers each pack feeds (fields of :class:`EnergyBreakdown`)
+BASE_CONSUMERS = ('base_idle', 'motors')
+COMPUTER_CONSUMERS = ('laptop_idle', 'cpu', 'radio')
+
+
+@dataclass
+class PackConfig:
+    """One battery pack (``battery.base_pack`` / ``battery.computer_pack`` in config/battery.yaml)."""
+
+    topic: str                          # sensor_msgs/BatteryState topic the pack is published on
+    location: str                       # BatteryState.location
+    capacity_ah: float
+    nominal_voltage: float
+    full_voltage: float
+    empty_voltage: float
+    percentage_at_empty_voltage: float  # % the pack reports at empty_voltage (Kobuki: 5)
+    initial_percentage: float
+
+    @classmethod
+    def from_section(cls, s: Section) -> 'PackConfig':
+        """The pack's constants from ``s`` (a missing or bad one is a ConfigError naming it)."""
+        cfg = cls(topic=s.string('topic'), location=s.string('location'),
+                  capacity_ah=s.number('capacity_ah', positive=True),
+                  nominal_voltage=s.number('nominal_voltage', positive=True),
+                  full_voltage=s.number('full_voltage', positive=True),
+                  empty_voltage=s.number('empty_voltage', nonnegative=True),
+                  percentage_at_empty_voltage=s.number('percentage_at_empty_voltage', minimum=0.0, maximum=99.0),
+                  initial_percentage=s.number('initial_percentage', minimum=0.0, maximum=100.0))
+        if not cfg.topic:
+            raise s.error('topic', 'must name a topic')
+        if not cfg.full_voltage > cfg.empty_voltage:
+            raise s.error('full_voltage', 'must be greater than empty_voltage')
+        return cfg
+
 
 @dataclass
 class BatteryConfig:
     """Constants of the model (every one set in config/battery.yaml with its source)."""
 
-    capacity_ah: float
-    nominal_voltage: float
-    full_voltage: float
-    empty_voltage: float
-    initial_percentage: float
+    base_pack: PackConfig
+    computer_pack: PackConfig
     base_idle_power: float
     laptop_idle_power: float
     mass: float
@@ -53,18 +88,15 @@ class BatteryConfig:
     @classmethod
     def from_section(cls, s: Section) -> 'BatteryConfig':
         """Every constant from ``s`` (a missing one is a ConfigError naming it)."""
-        kw = {}
-        for name in cls.__dataclass_fields__:
-            if name in ('initial_percentage',):
-                kw[name] = s.number(name, minimum=0.0, maximum=100.0)
-            else:
-                kw[name] = s.number(name, nonnegative=True)
-        cfg = cls(**kw)
-        for key in ('capacity_ah', 'nominal_voltage', 'motor_efficiency', 'cpu_capacity'):
+        kw = {name: s.number(name, nonnegative=True) for name in cls.__dataclass_fields__
+              if name not in ('base_pack', 'computer_pack')}
+        cfg = cls(base_pack=PackConfig.from_section(s.section('base_pack')),
+                  computer_pack=PackConfig.from_section(s.section('computer_pack')), **kw)
+        for key in ('motor_efficiency', 'cpu_capacity'):
             if not getattr(cfg, key) > 0:
                 raise s.error(key, 'must be > 0')
-        if not cfg.full_voltage > cfg.empty_voltage:
-            raise s.error('full_voltage', 'must be greater than empty_voltage')
+        if cfg.base_pack.topic == cfg.computer_pack.topic:
+            raise s.error('computer_pack.topic', f"must differ from base_pack.topic ('{cfg.base_pack.topic}')")
         return cfg
 
 
@@ -72,18 +104,73 @@ class BatteryConfig:
 class EnergyBreakdown:
     """Energy used so far per consumer [J]."""
 
-    idle: float = 0.0
+    base_idle: float = 0.0
     motors: float = 0.0
+    laptop_idle: float = 0.0
     cpu: float = 0.0
     radio: float = 0.0
 
     @property
+    def idle(self) -> float:
+        """Both packs' idle draw [J]."""
+        return self.base_idle + self.laptop_idle
+
+    @property
     def total(self) -> float:
-        return self.idle + self.motors + self.cpu + self.radio
+        return self.base_idle + self.motors + self.laptop_idle + self.cpu + self.radio
+
+
+class Pack:
+    """One pack's state: ``percentage``/``voltage``/``charge_ah``/``current`` from the energy of its consumers.
+
+    Args:
+        config: its constants.
+        energy: the model's breakdown, of which the pack feeds ``consumers``.
+        consumers: fields of ``energy``.
+    """
+
+    def __init__(self, config: PackConfig, energy: EnergyBreakdown, consumers: Tuple[str, ...]) -> None:
+        self.config = config
+        self.consumers = consumers
+        self.capacity_j = config.capacity_ah * 3600.0 * config.nominal_voltage
+        self.power = 0.0          # latest power drawn from the pack [W]
+        self._energy = energy
+
+    @property
+    def drawn(self) -> float:
+        """Energy drawn from the pack so far [J]."""
+        return sum(getattr(self._energy, k) for k in self.consumers)
+
+    @property
+    def breakdown(self) -> Dict[str, float]:
+        """Energy drawn so far per consumer of the pack [J]."""
+        return {k: getattr(self._energy, k) for k in self.consumers}
+
+    @property
+    def percentage(self) -> float:
+        """State of charge [%]."""
+        initial = self.config.initial_percentage / 100.0 * self.capacity_j
+        return max(0.0, initial - self.drawn) / self.capacity_j * 100.0
+
+    @property
+    def charge_ah(self) -> float:
+        return self.percentage / 100.0 * self.config.capacity_ah
+
+    @property
+    def voltage(self) -> float:
+        """Pack voltage [V], linear in the state of charge (module docstring)."""
+        c = self.config
+        p0 = c.percentage_at_empty_voltage
+        return c.empty_voltage + max(self.percentage - p0, 0.0) / (100.0 - p0) * (c.full_voltage - c.empty_voltage)
+
+    @property
+    def current(self) -> float:
+        """Discharge current [A] (negative: discharging, as sensor_msgs/BatteryState)."""
+        return -self.power / max(self.voltage, 1e-6)
 
 
 class BatteryModel:
-    """Integrates the drain; ``percentage``/``voltage``/``charge`` describe the pack.
+    """Integrates the drain into the two packs, ``base`` and ``computer``; ``energy`` is the breakdown.
 
     Args:
         config: the constants.
@@ -91,13 +178,16 @@ class BatteryModel:
 
     def __init__(self, config: BatteryConfig) -> None:
         self.config = config
-        self.capacity_j = config.capacity_ah * 3600.0 * config.nominal_voltage
         self.energy = EnergyBreakdown()
+        self.base = Pack(config.base_pack, self.energy, BASE_CONSUMERS)
+        self.computer = Pack(config.computer_pack, self.energy, COMPUTER_CONSUMERS)
         self.cpu_seconds = 0.0    # CPU time charged so far [s]
         self.radio_bytes = 0      # radio traffic charged so far [bytes]
-        self.power = 0.0          # latest total power [W] (idle + motors + measured work rate)
-        self._cpu_rate = 0.0
-        self._radio_rate = 0.0
+        self._work_rate = 0.0     # latest measured CPU + radio power [W]
+
+    @property
+    def packs(self) -> Tuple[Pack, Pack]:
+        return self.base, self.computer
 
     @property
     def cpu_joules_per_cpu_second(self) -> float:
@@ -114,11 +204,13 @@ class BatteryModel:
     def step(self, dt: float, v: float, w: float, accel: float, alpha: float) -> None:
         """Advance sim time by dt [s] with the base's motion over the step."""
         c = self.config
-        idle = (c.base_idle_power + c.laptop_idle_power) * dt
-        motors = self.motor_power(v, w, accel, alpha) * dt
-        self.energy.idle += idle
-        self.energy.motors += motors
-        self.power = (idle + motors) / dt + self._cpu_rate + self._radio_rate if dt > 0 else self.power
+        motors = self.motor_power(v, w, accel, alpha)
+        self.energy.base_idle += c.base_idle_power * dt
+        self.energy.motors += motors * dt
+        self.energy.laptop_idle += c.laptop_idle_power * dt
+        if dt > 0:
+            self.base.power = c.base_idle_power + motors
+            self.computer.power = c.laptop_idle_power + self._work_rate
 
     def add_work(self, cpu_seconds: float, bytes_transferred: float, interval: float) -> None:
         """Account measured CPU time [s] and radio traffic [bytes] that happened over ``interval`` [s]."""
@@ -130,30 +222,8 @@ class BatteryModel:
         self.cpu_seconds += max(cpu_seconds, 0.0)
         self.radio_bytes += int(max(bytes_transferred, 0))
         if interval > 0:
-            self._cpu_rate = e_cpu / interval
-            self._radio_rate = e_radio / interval
-
-    @property
-    def percentage(self) -> float:
-        """State of charge [%]."""
-        initial = self.config.initial_percentage / 100.0 * self.capacity_j
-        return max(0.0, initial - self.energy.total) / self.capacity_j * 100.0
-
-    @property
-    def charge_ah(self) -> float:
-        return self.percentage / 100.0 * self.config.capacity_ah
-
-    @property
-    def voltage(self) -> float:
-        """Pack voltage [V] from Kobuki's linear percentage mapping (inverted)."""
-        c = self.config
-        pct = self.percentage
-        return c.empty_voltage + max(pct - 5.0, 0.0) / 95.0 * (c.full_voltage - c.empty_voltage)
-
-    @property
-    def current(self) -> float:
-        """Discharge current [A] (negative: discharging, as sensor_msgs/BatteryState)."""
-        return -self.power / max(self.voltage, 1e-6)
+            self._work_rate = (e_cpu + e_radio) / interval
+            self.computer.power = c.laptop_idle_power + self._work_rate
 
 
 class CpuMeter:
