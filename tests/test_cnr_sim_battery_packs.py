@@ -167,12 +167,26 @@ def test_results_files_with_one_pack_are_read_and_appended_in_their_columns(tmp_
         append_result(str(bad), dict(id='z'))
 
 
-def test_mission_summary_reports_a_pack():
+def test_mission_b_task_and_summary_per_pack():
+    """The mission monitor keeps each pack's readings; its B_task is the computer pack's, to the hotspot."""
+    import math
     from types import SimpleNamespace as Msg
-    from cnr_mission.core.report import pack_used
-    first = Msg(percentage=0.99, charge=5.148, serial_number='laptop_idle=0.0J cpu=0.0J radio=0.0J')
-    last = Msg(percentage=0.98, charge=5.096, serial_number='laptop_idle=900.0J cpu=70.0J radio=30.0J')
-    used = pack_used(first, last)
-    assert used['used_percent'] == pytest.approx(1.0) and used['used_ah'] == pytest.approx(0.052)
-    assert used['energy'] == last.serial_number
-    assert pack_used(None, last) is None and pack_used(first, None) is None
+    from cnr_mission.core.report import PackReadings
+
+    def reading(t, percentage, charge):
+        return Msg(header=Msg(stamp=t), percentage=percentage, charge=charge, serial_number=f'cpu={t}J')
+
+    pack = PackReadings()
+    assert math.isnan(pack.used_to_hotspot()) and pack.used() is None
+    pack.add(reading(1, 0.99, 5.148))
+    pack.add(reading(2, 0.985, 5.122))
+    pack.add(reading(3, 0.98, 5.096), hotspot_stamp=3)       # the first reading from the hotspot's time on
+    pack.add(reading(4, 0.97, 5.044), hotspot_stamp=3)
+    assert pack.used_to_hotspot() == pytest.approx(0.01)
+    used = pack.used()
+    assert used['used_percent'] == pytest.approx(2.0) and used['used_ah'] == pytest.approx(0.104)
+    assert used['energy'] == 'cpu=4J'
+    without = PackReadings()
+    without.add(reading(1, 0.99, 5.148))
+    without.add(reading(2, 0.97, 5.044))
+    assert without.used_to_hotspot() == pytest.approx(0.02)                  # no hotspot: to the last reading

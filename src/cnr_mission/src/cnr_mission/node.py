@@ -23,10 +23,10 @@ import cnr_params
 from cnr_maps.grid import MapcellGrid
 from cnr_maps.mapio import load_map
 from cnr_maps.measurements import Measurement, write_tsv
-from cnr_mission.core.report import CellSummary, check_store, pack_used, path_length, render_png, write_summary
+from cnr_mission.core.report import CellSummary, PackReadings, check_store, path_length, render_png, write_summary
 from cnr_mission.core.scenario import read_mission
 from cnr_mission.core.timeline import write_timeline
-from cnr_mission.core.task import COMPLETED, TIMED_OUT, battery_used
+from cnr_mission.core.task import COMPLETED, TIMED_OUT
 from cnr_msgs.msg import (BatteryEnergy, CellStates, Hotspot, MergedMeasurement, MfgActivity, MigrationEvent,
                           NetworkProfile, Placement, SearchState, StoreForwardStatus, TaskDecision)
 from cnr_msgs.srv import Decide, EvaluateTask, GetMeasurements
@@ -62,10 +62,8 @@ class MissionMonitor:
         self.relay_expected = bool(relay_topic)
         self.lock = threading.Lock()
         self.trajectory: List[Tuple[float, float]] = []
-        self.battery_first: Optional[BatteryState] = None
-        self.battery_last: Optional[BatteryState] = None
-        self.battery_at_hotspot: Optional[BatteryState] = None     # the first reading from the hotspot's time on
-        self.computer_battery: List[Optional[BatteryState]] = [None, None]   # the robot computer's pack: first, last
+        self.base_battery = PackReadings()          # the Kobuki base's pack (battery_state)
+        self.computer_battery = PackReadings()      # the robot computer's (laptop_charge, the netbook's): B_task
         self.energy_first: Optional[BatteryEnergy] = None
         self.energy_last: Optional[BatteryEnergy] = None
         self.cells: Optional[CellStates] = None
@@ -76,9 +74,9 @@ class MissionMonitor:
         self.start_sim: Optional[float] = None
         self.wall0 = time.monotonic()
         rospy.Subscriber('base_pose_ground_truth', Odometry, self._on_pose, queue_size=10)
-        rospy.Subscriber('battery_state', BatteryState, self._on_battery, queue_size=2)
+        rospy.Subscriber('battery_state', BatteryState, self._on_battery, self.base_battery, queue_size=2)
+        rospy.Subscriber('laptop_charge', BatteryState, self._on_battery, self.computer_battery, queue_size=2)
         rospy.Subscriber('battery/energy', BatteryEnergy, self._on_energy, queue_size=2)
-        rospy.Subscriber('laptop_charge', BatteryState, self._on_computer_battery, queue_size=2)
         rospy.Subscriber('cell_states', CellStates, lambda m: setattr(self, 'cells', m), queue_size=1)
         rospy.Subscriber('hotspot', Hotspot, self._on_hotspot, queue_size=1)
         rospy.Subscriber('merged_measurements', MergedMeasurement, self._on_measurement, queue_size=100)
@@ -131,16 +129,9 @@ class MissionMonitor:
             if not self.trajectory or math.hypot(p.x - self.trajectory[-1][0], p.y - self.trajectory[-1][1]) > 0.02:
                 self.trajectory.append((p.x, p.y))
 
-    def _on_battery(self, msg: BatteryState) -> None:
-        if self.battery_first is None:
-            self.battery_first = msg
-        self.battery_last = msg
+    def _on_battery(self, msg: BatteryState, pack: PackReadings) -> None:
         h = self.hotspot
-        if h is not None and self.battery_at_hotspot is None and msg.header.stamp >= h.header.stamp:
-            self.battery_at_hotspot = msg
-
-    def _on_computer_battery(self, msg: BatteryState) -> None:
-        self.computer_battery = [self.computer_battery[0] or msg, msg]
+        pack.add(msg, None if h is None else h.header.stamp)
 
     def _on_activity(self, msg: MfgActivity) -> None:
         self.activity, self.activity_received = msg, rospy.Time.now().to_sec()
@@ -196,14 +187,12 @@ class MissionMonitor:
     def task_measures(self, found: bool) -> Tuple[str, float, float]:
         """The mission as a task (thesis §4.2.3; the network-aware decision's evaluation and the control runs of
         exp_control.sh): status completed when the hotspot was found, else timed_out; T_task the sim time to the
-        hotspot (or the whole mission); B_task the battery fraction used over the same time (to the first reading
-        from the hotspot's time on, 1 Hz)."""
-        h, b0 = self.hotspot, self.battery_first
-        b1 = self.battery_at_hotspot or self.battery_last
+        hotspot (or the whole mission); B_task the fraction of the robot computer's battery used over the same time
+        (to the first reading from the hotspot's time on, 1 Hz), as the thesis read the netbook's."""
+        h = self.hotspot
         t = h.header.stamp.to_sec() - self.start_sim if h is not None and self.start_sim is not None \
             else self._sim_since_start()
-        b = battery_used(b0.percentage, b1.percentage) if b0 is not None and b1 is not None else math.nan
-        return (COMPLETED if found else TIMED_OUT), t, b
+        return (COMPLETED if found else TIMED_OUT), t, self.computer_battery.used_to_hotspot()
 
     def evaluate_decision(self, found: bool) -> None:
         """Eq. 4-5 for the mission's decision (network_monitor's ~evaluate), by :meth:`task_measures`."""
@@ -211,7 +200,7 @@ class MissionMonitor:
             return
         status, t, b = self.task_measures(found)
         if not math.isfinite(b):
-            self.evaluation = 'not evaluated: no battery reading (the simulator\'s battery_state never came)'
+            self.evaluation = 'not evaluated: no battery reading (the simulator\'s laptop_charge never came)'
             self._say(f'network-aware: {self.evaluation}')
             return
         try:
@@ -356,7 +345,7 @@ class MissionMonitor:
         with self.lock:
             traj = list(self.trajectory)
         h = self.hotspot
-        b0, b1 = self.battery_first, self.battery_last
+        b0, b1 = self.base_battery.first, self.base_battery.last
         now = rospy.Time.now().to_sec()
         status, t_task, b_task = self.task_measures(found)
         relay = self.relay_drained or self.relay
@@ -373,7 +362,7 @@ class MissionMonitor:
             battery_used_ah=None if b0 is None else b0.charge - b1.charge,
             battery_energy=None if b1 is None else b1.serial_number,
             # battery_used_* and battery_energy: the base's pack (battery_state); the robot computer's (the netbook's):
-            computer_battery=pack_used(*self.computer_battery),
+            computer_battery=self.computer_battery.used(),
             # energy drawn during the mission per consumer [J]: CPU = the robot's processes (its cgroup on the
             # testbed), radio = bytes on the robot's link interface
             energy=None if self.energy_first is None else {

@@ -5,7 +5,7 @@ Files written into the report folder:
 * ``measurements.tsv`` — the stored measurements in the format of :mod:`cnr_maps.measurements`
   (written with its ``write_tsv``);
 * ``summary.json`` — scenario, hotspot, sim time to find it, distance driven, battery used (the base's pack and
-  the robot computer's, :func:`pack_used`), counts;
+  the robot computer's, :class:`PackReadings`), counts;
 * ``mapcells.png`` — the map with every mapcell coloured by its average temperature, the robot's path and
   the hotspot marked.
 """
@@ -18,6 +18,7 @@ from typing import Dict, Optional, Sequence, Tuple
 
 import numpy as np
 
+from cnr_mission.core.task import battery_used
 from cnr_params.files import write_json
 
 
@@ -42,14 +43,36 @@ def path_length(points: Sequence[Tuple[float, float]]) -> float:
     return float(np.sum(np.hypot(np.diff(p[:, 0]), np.diff(p[:, 1]))))
 
 
-def pack_used(first, last) -> Optional[Dict]:
-    """What a battery pack gave over the mission, from its first and last sensor_msgs/BatteryState (None without
-    a reading): ``used_percent`` [%], ``used_ah`` [Ah] and ``energy`` (J per consumer, the simulator's
-    ``serial_number`` text)."""
-    if first is None or last is None:
-        return None
-    return dict(used_percent=100.0 * (first.percentage - last.percentage), used_ah=first.charge - last.charge,
-                energy=last.serial_number)
+class PackReadings:
+    """One battery pack's sensor_msgs/BatteryState readings over the mission: the first, the last and the first
+    from the hotspot's time on."""
+
+    def __init__(self) -> None:
+        self.first = self.last = self.at_hotspot = None
+
+    def add(self, msg, hotspot_stamp=None) -> None:
+        """A reading; ``hotspot_stamp``: the hotspot's stamp once there is one (comparable with the header's)."""
+        if self.first is None:
+            self.first = msg
+        self.last = msg
+        if hotspot_stamp is not None and self.at_hotspot is None and msg.header.stamp >= hotspot_stamp:
+            self.at_hotspot = msg
+
+    def used_to_hotspot(self) -> float:
+        """The fraction of the pack used from the first reading to the first from the hotspot's time on (the last
+        without a hotspot); NaN without readings (:func:`cnr_mission.core.task.battery_used`)."""
+        end = self.at_hotspot or self.last
+        return battery_used(None if self.first is None else self.first.percentage,
+                            None if end is None else end.percentage)
+
+    def used(self) -> Optional[Dict]:
+        """What the pack gave over the mission (None without a reading): ``used_percent`` [%], ``used_ah`` [Ah]
+        and ``energy`` (J per consumer, the simulator's ``serial_number`` text)."""
+        first, last = self.first, self.last
+        if first is None:
+            return None
+        return dict(used_percent=100.0 * (first.percentage - last.percentage), used_ah=first.charge - last.charge,
+                    energy=last.serial_number)
 
 
 def write_summary(path: str, summary: Dict) -> None:
