@@ -105,3 +105,17 @@ def test_an_unfinished_run_is_none_and_every_config_has_mission_arguments(tmp_pa
         args = flap.mission_args(config)
         assert args[:2] == ['--two-host', '--placement']
     assert '--network-aware' in flap.mission_args('network_aware')
+
+
+def test_a_restore_the_next_event_cut_short_neither_meets_nor_misses_the_bound(tmp_path):
+    """Outage 0 ends 0.68 s before the next event begins, not yet restored: cut short (the next outage's restore
+    covers both). Outage 1 ends 5 s before the next, not restored: a miss. The last one restored."""
+    played = [event(0, 99.0, 105.0), event(1, 105.68, 110.0), event(2, 115.0, 116.0)]
+    assert flap.cut_short([None, None, 0.2], played) == [True, False, False]
+    assert flap.cut_short([0.1, 0.2, 0.2], played) == [False, False, False]
+    folder = flap.run_folder(str(tmp_path), 'paper_normal', 1)
+    write_run(folder, good_summary(), played, ['', '', 0.2])
+    run = flap.load_run(folder, 'paper_normal', 1)
+    assert (run.not_restored, run.cut_short) == (1, 1)
+    assert run.goal_failures() == ['restore max 0.20 s, 1 not restored']
+    assert '(1; 1)' in flap.table([run])
