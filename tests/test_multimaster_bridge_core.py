@@ -339,3 +339,10 @@ def test_a_kept_state_ages_with_the_time_since_it_arrived():
     assert not remote_serves(sync.aged_state(state, 4.0))     # as it is now: the local one is newer
     assert sync.aged_state(state, 4.0)['srvs'] == {'/s': ['/p', 'rosrpc://c:1', 6.0]}
     assert state['srvs']['/s'][2] == 2.0 and sync.aged_state(state, 0.0) is state
+
+
+def test_the_watch_keeps_every_change_of_the_violations():
+    from multimaster_bridge.watch import changes
+    samples = [(1.0, ['a']), (1.1, ['a']), (1.2, []), (1.3, []), (1.4, ['b']), (1.5, [])]
+    assert changes(samples) == [(1.0, ['a']), (1.2, []), (1.4, ['b']), (1.5, [])]
+    assert changes([]) == []

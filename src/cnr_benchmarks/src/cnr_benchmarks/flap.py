@@ -13,7 +13,7 @@ plays the same schedule (seed S + i). Configurations (default: all):
   network_aware                                        the network-aware main job (--network-aware)
 While a run plays, both masters are polled (20 Hz) and, per outage, the time from the link's return until each
 holds the other's registrations again is recorded (multimaster_bridge.watch). Per run, in
-bench_results/flap/runs/<config>-<i>/: the mission's report, schedule.tsv, restore.tsv, the mission's output
+bench_results/flap/runs/<config>-<i>/: the mission's report, schedule.tsv, restore.tsv, watch.tsv (every change of the invariant's violations, wall time), the mission's output
 (<folder>.log). Resumable: a run whose summary.json exists is kept (--fresh starts over). Then the page
 docs/results/flap/README.md (or DIR) and runs.tsv. About 5 minutes per run.
 """
@@ -148,6 +148,10 @@ def run_one(tb: Testbed, config: str, folder: str, events: List[Outage], port: i
     results.write_tsv(os.path.join(folder, 'restore.tsv'), core.RESTORE_COLUMNS,
                       [[i, p['wall_end'], r, '; '.join(problems[:3])] for i, (p, r, problems) in
                        enumerate(zip(played, restored.restores, restored.last_problems))] if restored else [])
+    if watch is not None:
+        to_wall = time.time() - time.monotonic()
+        results.write_tsv(os.path.join(folder, 'watch.tsv'), core.WATCH_COLUMNS,
+                          [[f'{t + to_wall:.3f}', int(not wrong), '; '.join(wrong)] for t, wrong in watch.changes()])
     with open(os.path.join(folder, 'status'), 'w') as f:
         f.write(f'{status}\n')
     if status == report.EXIT_INTERRUPTED:

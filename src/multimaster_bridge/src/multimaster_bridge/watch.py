@@ -228,6 +228,12 @@ class RestoreWatch:
         with self._lock:
             return list(self._samples[-1][1]) if self._samples else ['not polled yet']
 
+    def changes(self) -> List[Tuple[float, List[str]]]:
+        """Every poll whose violations differ from the poll before (the first one too): (time, violations), in
+        time order; what a later analysis needs to judge the registrations across by any other criterion."""
+        with self._lock:
+            return changes(list(self._samples))
+
     def results(self) -> RestoreResults:
         """Per outage ended: the restore time within its window (up to the next outage's begin or now)."""
         with self._lock:
@@ -246,6 +252,15 @@ def restore_times(samples: List[Tuple[float, List[str]]], began: List[float], en
     return out
 
 
+def changes(samples: List[Tuple[float, List[str]]]) -> List[Tuple[float, List[str]]]:
+    """The samples whose violations differ from the sample before (the first one too)."""
+    out: List[Tuple[float, List[str]]] = []
+    for t, wrong in samples:
+        if not out or wrong != out[-1][1]:
+            out.append((t, wrong))
+    return out
+
+
 def _restore(window: List[Tuple[float, List[str]]], t: float) -> Optional[float]:
     """Seconds from ``t`` to the first sample from which every sample of ``window`` holds (None: the last does
     not). A sample's time is when its poll ended, so the poll before it bounds the restore from below: the
@@ -258,4 +273,4 @@ def _restore(window: List[Tuple[float, List[str]]], t: float) -> Optional[float]
     return max(0.0, window[first][0] - t)
 
 
-__all__ = ['MasterReader', 'RestoreResults', 'RestoreWatch', 'bridge_filters', 'check', 'restore_times']
+__all__ = ['MasterReader', 'RestoreResults', 'RestoreWatch', 'bridge_filters', 'changes', 'check', 'restore_times']

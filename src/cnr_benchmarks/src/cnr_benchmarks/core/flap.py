@@ -36,6 +36,7 @@ STANDSTILL_SLACK = 2.0      # s: the robot with a task pending gets a goal withi
 RESTORE_GOAL = 1.0          # s: registrations restored this long after the link returns at most
 SCHEDULE_COLUMNS = ['index', 'start', 'duration', 'direction', 'kind', 'loss', 'wall_start', 'wall_end']
 RESTORE_COLUMNS = ['index', 'wall_end', 'restored_after', 'last_problems']
+WATCH_COLUMNS = ['wall', 'holds', 'problems']     # watch.tsv: every change of the invariant's violations
 
 # rospy's console lines: ``[INFO] [<wall time>]: ...``, or ``[INFO] [<wall time>, <sim time>]: ...`` under sim time
 _STAMP = r'\[(?:INFO|WARN|ERROR)\] \[(?P<t>\d+\.\d+)(?:, [\d.]+)?\]: '
