@@ -42,4 +42,6 @@ def test_the_split_mission_with_migration_meets_the_goal_line_under_a_flapping_l
     # the goal line's time bounds on the bridge's restores are bench_flap's to measure (timing targets are
     # benchmarks, not tests); every other part of it holds here
     assert run.invariant_failures() == [], (run.row(), out[-3000:])
+    watched = core.read_tsv_rows(os.path.join(folder, 'watch.tsv'))
+    assert watched and watched[-1]['holds'] == '1', watched[-3:]     # every change of the invariant, ending held
     assert 'Traceback' not in out
