@@ -208,35 +208,3 @@ def test_disabled_it_gives_no_goal(params, workspace):
     r.run(4.0, [('/mfg-1-0.0', ACTIVE)], speed=0.5)
     t = r.run(4.0 + 3 * s.p.comms_loss.after, [('/mfg-1-0.0', SUCCEEDED)])
     assert s.comms.goal(t) is None and s.due(t)
-
-
-def test_back_in_the_link_the_stand_in_waits_for_the_source_then_patrols(params):
-    """A cloud-side source needs seconds to resume after an outage: no patrol goal takes the robot out of the
-    link again for ``after``, unless a goal of the source is pursued first."""
-    p = params.comms_loss
-    s = Standin(params, own)
-    r = Robot(s, corridor)
-    r.run(4.0, [('/mfg-1-0.0', ACTIVE)], speed=0.5)
-    t = r.run(4.0 + p.after + 0.2, [('/mfg-1-0.0', SUCCEEDED)])
-    assert s.comms.goal(t) is not None and not s.comms.resuming(t)
-    s.comms.sent()
-    s.sent()
-    t = r.run(t + 1.4, [('/goal_standin-1-14.0', ACTIVE)], speed=-0.5)      # x = 1.3: the link is back at 1.5
-    t_back = s.comms.regained
-    assert t_back == pytest.approx(t - 0.6)
-    r.up = lambda x: False                                                # then lost again, the source silent
-    t = r.run(t_back + p.after - 0.4, [('/goal_standin-1-14.0', SUCCEEDED)])
-    assert s.due(t) and s.comms.goal(t) is None and s.comms.resuming(t)   # patrol due: held back
-    t = r.run(t_back + p.after + 0.2, [('/goal_standin-1-14.0', SUCCEEDED)])
-    assert not s.comms.resuming(t) and s.due(t)                           # the source gave nothing: patrol
-    # a goal of the source ends the wait at once
-    s2 = Standin(params, own)
-    r2 = Robot(s2, corridor)
-    r2.run(4.0, [('/mfg-1-0.0', ACTIVE)], speed=0.5)
-    t = r2.run(4.0 + p.after + 0.2, [('/mfg-1-0.0', SUCCEEDED)])
-    assert s2.comms.goal(t) is not None
-    s2.comms.sent()
-    t = r2.run(t + 1.4, [('/goal_standin-1-14.0', ACTIVE)], speed=-0.5)
-    assert s2.comms.resuming(t)
-    t = r2.run(t + 0.4, [('/goal_standin-1-14.0', PREEMPTED), ('/mfg-2-15.0', ACTIVE)])
-    assert not s2.comms.resuming(t)

@@ -153,14 +153,11 @@ class GoalStandin:
         ``resend``: ... but move_base has not acknowledged it within ``ack_timeout``."""
         comms = self.core.comms
         target = comms.goal(now)
-        if target is None and comms.resuming(now):
-            return True                          # back in the link: the source's turn (or its goal in progress)
         if target is None:
             if self.returning:
                 self.returning = False
                 self.returning_pub.publish(Bool(False))
-                why = 'waited there without it' if comms.given_up else 'the link is back and the source\'s goal ' \
-                    'is pursued, or it gave none within comms_loss.after'
+                why = 'waited there without it' if comms.given_up else 'the link or the source\'s goal is back'
                 rospy.logwarn(f'goal_standin: comms loss over ({why}): the ordinary stand-in goes on')
             return False
         if comms.driving:

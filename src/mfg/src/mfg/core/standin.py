@@ -221,15 +221,12 @@ class CommsLoss:
         self.driving = False                                # its goal to the target is being driven to
         self.arrived: Optional[float] = None                # when that goal ended (waiting there for the link)
         self.given_up = False                               # arrived and waited ``after``: the place does not help
-        self.regained: Optional[float] = None               # the link came back after a comms loss: since then
 
     def link(self, t: float, good: Optional[bool], pose: Optional[Tuple[float, float]]) -> None:
         """A link quality message at ``t`` judged ``good`` (:class:`LinkJudge`), the robot at ``pose`` then."""
         if not good:
             return
         self.last_good = t
-        if self.target is not None:
-            self.regained = t
         self._end()
         if pose is not None:
             self._extend(pose)
@@ -264,7 +261,6 @@ class CommsLoss:
             return None
         if self.path.source_goal(now):
             self._end()                       # the source's goal crossed: it drives, the loss is over
-            self.regained = None
             return None
         since = self.lost_since(now)
         if since is None or not self.trail or now - since < self.p.after or self.given_up:
@@ -274,18 +270,7 @@ class CommsLoss:
             return None
         if self.target is None:
             self.target = self.trail[0]
-            self.regained = None
         return self.target
-
-    def resuming(self, now: float) -> bool:
-        """Back in the link after a comms loss: the stand-in gives no goal of its own for ``after`` (or until a
-        goal of the source is pursued), so that the source, which reaches the robot again, can resume (a cloud-side
-        source needs seconds to: its connections come back, its clock catches up) before a patrol goal takes the
-        robot out of the link again."""
-        if self.regained is None or self.path.source_goal(now) or now - self.regained >= self.p.after:
-            self.regained = None
-            return False
-        return True
 
     def sent(self) -> None:
         """Its goal to the target was sent."""
