@@ -302,7 +302,7 @@ def test_the_analysis_writes_campaign_summary_json_and_its_table(tmp_path, monke
 
 
 def test_rows_learned_during_the_runs_of_each_task():
-    from cnr_benchmarks.campaign_figures import learned_during
+    from cnr_benchmarks.core.decision_measures import learned_during
     runs = [dict(condition='c1', wall_start='100', wall_time='40'),
             dict(condition='c1', wall_start='100', wall_time='40', task='patrol'),
             dict(condition='c2', wall_start='200', wall_time='40')]

@@ -131,7 +131,10 @@ def test_no_comms_loss_goal_while_the_link_is_good_or_the_source_is_heard(params
     assert s.comms.goal(t + p.after + 2.0) is None
 
 
-def test_the_link_back_ends_it_and_the_ordinary_stand_in_goes_on(params):
+def returning(params):
+    """A robot that drove 2 m from the good end into the dead zone (past x = 1.5 m) and lost its source: its
+    comms-loss goal sent.
+    Returns (stand-in, robot, time)."""
     p = params.comms_loss
     s = Standin(params, own)
     r = Robot(s, corridor)
@@ -140,6 +143,11 @@ def test_the_link_back_ends_it_and_the_ordinary_stand_in_goes_on(params):
     assert s.comms.goal(t) is not None
     s.comms.sent()
     s.sent()
+    return s, r, t
+
+
+def test_the_link_back_ends_it_and_the_ordinary_stand_in_goes_on(params):
+    s, r, t = returning(params)
     t = r.run(t + 4.0, [('/goal_standin-1-14.0', ACTIVE)], speed=-0.5)    # driving back: x = 0 again, link up
     assert s.comms.goal(t) is None and s.comms.target is None and not s.comms.driving
     assert s.standing_in and s.path.alive(t)          # the link and the source are back: no chain, the timeout
@@ -148,14 +156,7 @@ def test_the_link_back_ends_it_and_the_ordinary_stand_in_goes_on(params):
 
 
 def test_a_source_goal_takes_over_from_the_comms_loss_goal(params):
-    p = params.comms_loss
-    s = Standin(params, own)
-    r = Robot(s, corridor)
-    r.run(4.0, [('/mfg-1-0.0', ACTIVE)], speed=0.5)
-    t = r.run(4.0 + p.after + 0.2, [('/mfg-1-0.0', SUCCEEDED)])
-    assert s.comms.goal(t) is not None
-    s.comms.sent()
-    s.sent()
+    s, r, t = returning(params)
     t = r.run(t + 0.4, [('/goal_standin-1-14.0', PREEMPTED), ('/mfg-2-14.0', ACTIVE)])
     assert s.comms.goal(t) is None and s.handed_back() and s.comms.target is None
 

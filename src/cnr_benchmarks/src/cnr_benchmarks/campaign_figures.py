@@ -11,7 +11,7 @@ import os
 import statistics
 import sys
 from dataclasses import dataclass
-from typing import Any, Dict, List, Optional, Sequence, Set, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import matplotlib
 
@@ -27,13 +27,6 @@ from cnr_benchmarks.session import slowdown_dir  # noqa: E402
 COMMAND_FILE = 'command.txt'        # in the campaign's folder: the command that made its rows
 TRAINING_FILE = 'training_set.tsv'  # in the campaign's page folder: the robot's learned set, published
 SUMMARY_FILE = 'campaign_summary.json'
-
-
-def _num(row: Dict[str, str], key: str) -> float:
-    try:
-        return float(row[key])
-    except (KeyError, ValueError):
-        return math.nan
 
 
 def _fmt(x: float, digits: int = 1) -> str:
@@ -138,7 +131,7 @@ def load_analysis(args: argparse.Namespace) -> Union[Analysis, int]:
     n_test = int(round(len(pairs) * args.test_fraction))
     n_train = len(pairs) - n_test
     learned = [t for t in training if t.source == 'local']
-    train_rows = learned_during(learned, rows, {(args.task, p.condition) for p in pairs[:n_train]}, args.task)
+    train_rows = dm.learned_during(learned, rows, {(args.task, p.condition) for p in pairs[:n_train]}, args.task)
     curve = _learning_curve(train_rows, n_train, pairs, oracle, oracle_noise, cfg.decision)
     # the same with one row per training pair labelled by the pair's (strict) oracle (core.paired_rows)
     paired = core.paired_rows(pairs[:n_train], oracle[:n_train])
@@ -156,18 +149,6 @@ def read_training(args: argparse.Namespace, task: str) -> Tuple[List[Any], List[
     if not os.path.exists(path) and task == args.task and os.path.exists(published):
         path = published
     return read_rows(path)
-
-
-def learned_during(learned: Sequence[Any], rows: Sequence[Dict[str, str]], keys: Set[Tuple[str, str]],
-                   default_task: str) -> List[Any]:
-    """The training rows learned during the runs of the ⟨task, condition⟩s ``keys``, in order: each row's timestamp
-    falls in its run's wall-clock span (a result row's task is its ``task`` field, ``default_task`` without one)."""
-    spans = [(_num(r, 'wall_start'), _num(r, 'wall_start') + _num(r, 'wall_time'),
-              (r.get('task') or default_task, r['condition'])) for r in rows]
-
-    def run_of(t: Any) -> Tuple[str, str]:
-        return next((key for a, b, key in spans if a <= t.timestamp <= b + 1.0 and key[0] == t.task), ('', ''))
-    return [t for t in learned if run_of(t) in keys]
 
 
 def _learning_curve(train_rows: Sequence, n_train: int, pairs: Sequence, oracle: Sequence[str],
@@ -234,9 +215,9 @@ def fig_time_vs_rbw(a: Analysis) -> Tuple[Any, float, float, float]:
     """Fig. 5-2: T_task vs R_bw (offloaded, completed), power fit, crossing with CT; (figure, crossing, crossing with
     the measured migration time, that time)."""
     ct = a.control.ct_mean
-    x = [_num(r, 'r_bw') for r in a.done_off]
-    y = [_num(r, 't_task') for r in a.done_off]
-    placing = [_num(r, 'placing_time') for r in a.offload_rows if _num(r, 'placing_time') > 0]
+    x = [core.number(r, 'r_bw') for r in a.done_off]
+    y = [core.number(r, 't_task') for r in a.done_off]
+    placing = [core.number(r, 'placing_time') for r in a.offload_rows if core.number(r, 'placing_time') > 0]
     migration_time = statistics.median(placing) if placing else math.nan
     fit = core.power_fit(x, y)
     x_lo, x_hi = (min(x), max(x)) if x else (0.0, 0.0)
@@ -258,10 +239,10 @@ def fig_time_vs_rbw(a: Analysis) -> Tuple[Any, float, float, float]:
 def fig_operating_time(a: Analysis):
     """Fig. 5-3: operating time (a full battery's worth of such tasks) vs R_bw."""
     def op_hours(r: Dict[str, str]) -> float:
-        b = _num(r, 'b_task')
-        return _num(r, 't_task') / b / 3600.0 if b > 0 else math.nan
+        b = core.number(r, 'b_task')
+        return core.number(r, 't_task') / b / 3600.0 if b > 0 else math.nan
     fig, ax = plt.subplots(figsize=FIGURE_SIZE)
-    ax.scatter([_num(r, 'r_bw') for r in a.done_off], [op_hours(r) for r in a.done_off], s=14, label='offloaded')
+    ax.scatter([core.number(r, 'r_bw') for r in a.done_off], [op_hours(r) for r in a.done_off], s=14, label='offloaded')
     local_op = a.control.ct_mean / a.control.cb_mean / 3600.0
     ax.axhline(local_op, color='k', ls='--', label=f'all local: {local_op:.2f} h')
     ax.set_xscale('log')
@@ -273,18 +254,18 @@ def fig_time_vs_rtt(a: Analysis) -> Tuple[Any, float, float]:
     """Fig. 5-4: T_task vs RTT (offloaded), linear fit, crossing with CT; (figure, crossing, failure RTT)."""
     from cnr_mission.core.task import COMPLETED
     ct = a.control.ct_mean
-    xr = [_num(r, 'c_l') * 1000 for r in a.done_off]
-    y = [_num(r, 't_task') for r in a.done_off]
+    xr = [core.number(r, 'c_l') * 1000 for r in a.done_off]
+    y = [core.number(r, 't_task') for r in a.done_off]
     lin = core.linear_fit(xr, y)
     cross_rtt = (ct - lin[0]) / lin[1] if lin and lin[1] > 0 else math.nan
     if not (xr and min(xr) <= cross_rtt <= max(xr)):
         cross_rtt = math.nan            # not within the measured RTTs: no extrapolation
-    fail_rtt = core.failure_rtt([(_num(r, 'rtt_ms'), r['mission_status']) for r in a.offload_rows])
+    fail_rtt = core.failure_rtt([(core.number(r, 'rtt_ms'), r['mission_status']) for r in a.offload_rows])
     failed = [r for r in a.offload_rows if r['mission_status'] != COMPLETED]
     fig, ax = plt.subplots(figsize=FIGURE_SIZE)
     ax.scatter(xr, y, s=14, label='offloaded, completed')
     if failed:
-        ax.scatter([_num(r, 'c_l') * 1000 for r in failed], [_num(r, 't_task') for r in failed], s=18, marker='x',
+        ax.scatter([core.number(r, 'c_l') * 1000 for r in failed], [core.number(r, 't_task') for r in failed], s=18, marker='x',
                    c='tab:red', label='offloaded, not completed')
     ax.axhline(ct, color='k', ls='--', label=f'CT = {ct:.1f} s')
     if lin:
@@ -338,7 +319,7 @@ def summary_text(a: Analysis) -> str:
     oracles."""
     from network_monitor.core.evaluation import OFFLOAD
     rows, pairs = a.rows, a.pairs
-    wall = sum(_num(r, 'wall_time') for r in rows if math.isfinite(_num(r, 'wall_time')))
+    wall = sum(core.number(r, 'wall_time') for r in rows if math.isfinite(core.number(r, 'wall_time')))
     unpaired = sorted({r['condition'] for r in rows} - {p.condition for p in pairs})
     not_placed = sorted({r['id'] for r in rows if r.get('placed') == '0'})
     statuses: Dict[Tuple[str, str], int] = {}
@@ -365,10 +346,10 @@ def summary_text(a: Analysis) -> str:
 def time_budget(a: Analysis) -> str:
     """Where a paired condition's wall-clock time goes (runs with a decision: the task, placing, the rest), and the
     elapsed time of the whole campaign."""
-    pair_wall = _median([_num(p.offload_row, 'wall_time') + _num(p.onload_row, 'wall_time') for p in a.pairs])
+    pair_wall = _median([core.number(p.offload_row, 'wall_time') + core.number(p.onload_row, 'wall_time') for p in a.pairs])
 
     def med_of(rs: Sequence[Dict[str, str]], key: str) -> str:
-        return _fmt(_median([_num(r, key) for r in rs]))
+        return _fmt(_median([core.number(r, key) for r in rs]))
     on, off = a.onload_rows, a.offload_rows
     budget = (f'Per paired condition (median over {len(a.pairs)}): {_fmt(pair_wall)} s of wall-clock time, i.e. 100 '
               f'conditions in {_fmt(100 * pair_wall / 3600, 2)} h; onload run {med_of(on, "wall_time")} s '
@@ -441,7 +422,7 @@ def accuracy_table(a: Analysis) -> List[str]:
 def thesis_table(a: Analysis, crossings: Crossings, good: Sequence[Any]) -> List[str]:
     """The figures' numbers beside the thesis's: crossings with CT, the failure RTT, local vs remote."""
     ct, cb = a.control.ct_mean, a.control.cb_mean
-    y = [_num(r, 't_task') for r in a.done_off]
+    y = [core.number(r, 't_task') for r in a.done_off]
     b_local, b_remote = [p.onload.b_task for p in good], [p.offload.b_task for p in good]
     t_local, t_remote = [p.onload.t_task for p in good], [p.offload.t_task for p in good]
     db = 100.0 * (_mean(b_remote) - _mean(b_local)) / _mean(b_local) if b_local else math.nan
@@ -450,7 +431,7 @@ def thesis_table(a: Analysis, crossings: Crossings, good: Sequence[Any]) -> List
         '| measure | thesis | measured |', '|---|---|---|',
         f'| offloaded runs faster than CT / cheaper than CB | (thesis: above R_bw ≈ 4.9 / most runs) | '
         f'{sum(1 for v in y if v < ct)} of {len(y)} / '
-        f'{sum(1 for r in a.done_off if _num(r, "b_task") < cb)} of {len(a.done_off)} |',
+        f'{sum(1 for r in a.done_off if core.number(r, "b_task") < cb)} of {len(a.done_off)} |',
         f'| Fig. 5-2: R_bw where offloading matches CT (– : no crossing within the measured R_bw) | ≈ 4.9 | '
         f'{_fmt(crossings.r_bw, 2)} |',
         f'| same, with the measured migration time ({_fmt(crossings.migration_time)} s, median placing time) | '
@@ -498,7 +479,7 @@ def decision_measures(a: Analysis, crossings: Crossings, good: Sequence[Any]) ->
                 continue
             learned += [t for t in read_training(a.args, task)[0] if t.source == 'local']
     train = dm.split(ts, a.args.test_fraction)[0]
-    train_rows = learned_during(learned, a.rows, {(t.task, t.condition) for t in train}, a.args.task)
+    train_rows = dm.learned_during(learned, a.rows, {(t.task, t.condition) for t in train}, a.args.task)
     elapsed = core.elapsed_time(a.all_rows)
     figures = dm.Figures(crossings.r_bw, crossings.r_bw_with_migration, crossings.rtt, crossings.fail_rtt,
                          dm.change_pct([p.onload.t_task for p in good], [p.offload.t_task for p in good]),

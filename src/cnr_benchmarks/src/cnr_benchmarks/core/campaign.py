@@ -32,7 +32,7 @@ import math
 import random
 import statistics
 from dataclasses import dataclass
-from typing import Dict, List, Optional, Sequence, Tuple
+from typing import Dict, List, Mapping, Optional, Sequence, Tuple
 
 import numpy as np
 
@@ -116,17 +116,18 @@ class Spread:
 def spread(rows: Sequence[Dict[str, str]], placement: str, key: str) -> Spread:
     """Mean and sd of ``key`` over the completed runs of one forced placement (local_remote rows)."""
     mine = [r for r in rows if r.get('force') == placement]
-    v = [_f(r, key) for r in mine if r.get('mission_status') == COMPLETED]
+    v = [number(r, key) for r in mine if r.get('mission_status') == COMPLETED]
     v = [x for x in v if math.isfinite(x)]
     return Spread(len(v), len(mine), statistics.mean(v) if v else math.nan,
                   statistics.stdev(v) if len(v) > 1 else math.nan)
 
 
 # ---------------------------------------------------------------- results
-def _f(row: Dict[str, str], key: str) -> float:
+def number(row: Mapping[str, str], key: str) -> float:
+    """A result row's field as a number (NaN: missing or not a number)."""
     try:
         return float(row.get(key, ''))
-    except ValueError:
+    except (TypeError, ValueError):
         return math.nan
 
 
@@ -147,7 +148,7 @@ class Pair:
 
 
 def outcome(row: Dict[str, str]) -> Outcome:
-    return Outcome(t_task=_f(row, 't_task'), b_task=_f(row, 'b_task'), mission_status=row['mission_status'])
+    return Outcome(t_task=number(row, 't_task'), b_task=number(row, 'b_task'), mission_status=row['mission_status'])
 
 
 def pairs(rows: Sequence[Dict[str, str]], k: int = 5) -> List[Pair]:
@@ -175,12 +176,12 @@ def pairs(rows: Sequence[Dict[str, str]], k: int = 5) -> List[Pair]:
         first, off, on = runs[0], placed[OFFLOAD], placed[ONLOAD]
         if first.get('force'):
             decided = first['policy']
-            reason = ('no_profile' if not math.isfinite(_f(first, 'c_l')) or not math.isfinite(_f(first, 'r_bw'))
+            reason = ('no_profile' if not math.isfinite(number(first, 'c_l')) or not math.isfinite(number(first, 'r_bw'))
                       else 'knn' if learned_before[c] >= k else 'cold_start')
         else:
             decided, reason = first['decision'], first['reason']
-        out.append(Pair(c, _f(first, 'rtt_ms'), _f(first, 'rate_mbit'), _f(first, 'loss'), _f(first, 'c_l'),
-                        _f(first, 'r_bw'), decided, reason, outcome(off), outcome(on), off, on))
+        out.append(Pair(c, number(first, 'rtt_ms'), number(first, 'rate_mbit'), number(first, 'loss'), number(first, 'c_l'),
+                        number(first, 'r_bw'), decided, reason, outcome(off), outcome(on), off, on))
     return out
 
 
@@ -191,7 +192,7 @@ def elapsed_time(rows: Sequence[Dict[str, str]], resume_gap: float = 120.0) -> f
     """Wall-clock time [s] the runs took from the first one's start to the last one's end, what happens between
     runs (evaluation, learning, the next link) included; a gap longer than a run plus ``resume_gap`` (a campaign
     stopped and resumed later) counts as that run only. 0 without timed rows."""
-    runs = sorted((_f(r, 'wall_start'), _f(r, 'wall_time')) for r in rows)
+    runs = sorted((number(r, 'wall_start'), number(r, 'wall_time')) for r in rows)
     runs = [(s, w) for s, w in runs if math.isfinite(s) and math.isfinite(w)]
     if not runs:
         return 0.0

@@ -38,11 +38,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Callable, Dict, List, Mapping, Optional, Sequence, Tuple
+from typing import Callable, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 import numpy as np
 
-from cnr_benchmarks.core.campaign import EITHER, Threshold, agrees, best_threshold, noise_tolerance
+from cnr_benchmarks.core.campaign import EITHER, Threshold, agrees, best_threshold, noise_tolerance, number
 from network_monitor.core.decision import Decider, DecisionSettings, Exploration
 from network_monitor.core.evaluation import COMPLETED, OFFLOAD, ONLOAD, ControlValues, Outcome, evaluation_value
 from network_monitor.core.training import Row
@@ -74,11 +74,16 @@ class Trial:
     onload: Tuple[Outcome, ...]
 
 
-def _f(row: Mapping[str, str], key: str) -> float:
-    try:
-        return float(row.get(key, ''))
-    except (TypeError, ValueError):
-        return math.nan
+def learned_during(learned: Sequence[Row], rows: Sequence[Mapping[str, str]], keys: Set[Tuple[str, str]],
+                   default_task: str) -> List[Row]:
+    """The training rows learned during the runs of the ⟨task, condition⟩s ``keys``, in order: each row's timestamp
+    falls in its run's wall-clock span (a result row's task is its ``task`` field, ``default_task`` without one)."""
+    spans = [(number(r, 'wall_start'), number(r, 'wall_start') + number(r, 'wall_time'),
+              (r.get('task') or default_task, r['condition'])) for r in rows]
+
+    def run_of(t: Row) -> Tuple[str, str]:
+        return next((key for a, b, key in spans if a <= t.timestamp <= b + 1.0 and key[0] == t.task), ('', ''))
+    return [t for t in learned if run_of(t) in keys]
 
 
 def trials(rows: Sequence[Mapping[str, str]], default_task: str) -> List[Trial]:
@@ -91,13 +96,13 @@ def trials(rows: Sequence[Mapping[str, str]], default_task: str) -> List[Trial]:
     out = []
     for (task, condition), runs in by.items():
         made = [r for r in runs if r.get('decision') in (OFFLOAD, ONLOAD) and r.get('placed') != '0']
-        off = tuple(Outcome(_f(r, 't_task'), _f(r, 'b_task'), r['mission_status']) for r in made
+        off = tuple(Outcome(number(r, 't_task'), number(r, 'b_task'), r['mission_status']) for r in made
                     if r['decision'] == OFFLOAD)
-        on = tuple(Outcome(_f(r, 't_task'), _f(r, 'b_task'), r['mission_status']) for r in made
+        on = tuple(Outcome(number(r, 't_task'), number(r, 'b_task'), r['mission_status']) for r in made
                    if r['decision'] == ONLOAD)
         if off and on:
             first = runs[0]
-            out.append(Trial(task, condition, _f(first, 'rtt_ms'), _f(first, 'c_l'), _f(first, 'r_bw'), off, on))
+            out.append(Trial(task, condition, number(first, 'rtt_ms'), number(first, 'c_l'), number(first, 'r_bw'), off, on))
     return out
 
 
