@@ -209,3 +209,21 @@ def test_disabled_it_gives_no_goal(params, workspace):
     r.run(4.0, [('/mfg-1-0.0', ACTIVE)], speed=0.5)
     t = r.run(4.0 + 3 * s.p.comms_loss.after, [('/mfg-1-0.0', SUCCEEDED)])
     assert s.comms.goal(t) is None and s.due(t)
+
+
+def test_the_steps_of_a_comms_loss_the_node_acts_on(params):
+    """step(): the goal sent once, sent again when move_base has not acknowledged it, nothing on the way, the arrival
+    once, then waiting; no comms loss: None."""
+    from mfg.core.standin import ARRIVED, ON_ITS_WAY, RESEND, SEND, WAITING
+    p = params.comms_loss
+    s = Standin(params, own)
+    r = Robot(s, corridor)
+    r.run(4.0, [('/mfg-1-0.0', ACTIVE)], speed=0.5)
+    t = r.run(4.0 + p.after - 1.0, [('/mfg-1-0.0', SUCCEEDED)])
+    assert s.comms.step(t, False, False) is None
+    t = r.run(4.0 + p.after + 0.2, [('/mfg-1-0.0', SUCCEEDED)])
+    assert s.comms.step(t, False, False) == SEND and s.comms.driving
+    assert s.comms.step(t + 0.1, True, True) == RESEND
+    assert s.comms.step(t + 0.2, True, False) == ON_ITS_WAY
+    assert s.comms.step(t + 0.3, False, False) == ARRIVED and s.comms.arrived == t + 0.3
+    assert s.comms.step(t + 0.4, False, False) == WAITING

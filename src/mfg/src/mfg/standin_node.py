@@ -27,7 +27,7 @@ from cnr_msgs.msg import CellStates, LinkQuality, MfgActivity, SearchState
 from cnr_params.ros import private_section
 from cnr_runtime import init_node
 from mfg.core.fallback import LocalGoals
-from mfg.core.standin import Standin, StandinParams, read_params
+from mfg.core.standin import ARRIVED, RESEND, SEND, Standin, StandinParams, read_params
 from mfg.goals import facing_away, in_flight, move_base_goal, unacknowledged
 
 
@@ -152,33 +152,27 @@ class GoalStandin:
         place with a good link, or waiting there for the link). ``flying``: the goal last sent is not over;
         ``resend``: ... but move_base has not acknowledged it within ``ack_timeout``."""
         comms = self.core.comms
-        target = comms.goal(now)
-        if target is None:
+        action = comms.step(now, flying, resend)
+        if action is None:
             if self.returning:
                 self.returning = False
                 self.returning_pub.publish(Bool(False))
                 why = 'waited there without it' if comms.given_up else 'the link or the source\'s goal is back'
                 rospy.logwarn(f'goal_standin: comms loss over ({why}): the ordinary stand-in goes on')
             return False
-        if comms.driving:
-            if flying and resend:
-                self._send(*target)
-            if flying:
-                return True                      # on its way back
-            comms.ended(now)                     # there (or move_base gave up): wait for the link
-            rospy.loginfo(f'goal_standin: back at the last place with a good link ({target[0]:.1f}, '
-                          f'{target[1]:.1f}): waiting for the link')
-            return True
-        if comms.arrived is not None:
-            return True
-        self._send(*target)
-        comms.sent()
-        if not self.returning:
-            self.returning = True
-            self.returning_pub.publish(Bool(True))
-        rospy.logwarn(f'goal_standin: comms loss: no goal of the source and no good link to '
-                      f'{self.p.comms_loss.peer} for {now - comms.lost_since(now):.1f} s: goal {self.goals_sent}: '
-                      f'back to ({target[0]:.1f}, {target[1]:.1f}), the last place with a good link')
+        x, y = comms.target
+        if action in (SEND, RESEND):
+            self._send(x, y)
+        if action == ARRIVED:
+            rospy.loginfo(f'goal_standin: back at the last place with a good link ({x:.1f}, {y:.1f}): waiting for '
+                          f'the link')
+        elif action == SEND:
+            if not self.returning:
+                self.returning = True
+                self.returning_pub.publish(Bool(True))
+            rospy.logwarn(f'goal_standin: comms loss: no goal of the source and no good link to '
+                          f'{self.p.comms_loss.peer} for {now - comms.lost_since(now):.1f} s: goal {self.goals_sent}: '
+                          f'back to ({x:.1f}, {y:.1f}), the last place with a good link')
         return True
 
 

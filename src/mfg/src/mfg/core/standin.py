@@ -180,6 +180,7 @@ class GoalPath:
         return idle if self.hold_left is None else max(idle, self.hold_left)
 
 
+SEND, RESEND, ON_ITS_WAY, ARRIVED, WAITING = 'send', 'resend', 'on its way', 'arrived', 'waiting'   # CommsLoss.step
 TRAIL_STEP = 0.05        # m: a position with a good link joins the trail this far from the last one (resolution)
 
 
@@ -281,6 +282,24 @@ class CommsLoss:
         if self.driving:
             self.driving = False
             self.arrived = now
+
+    def step(self, now: float, flying: bool, resend: bool) -> Optional[str]:
+        """What the stand-in does about a comms loss now (None: no comms loss, the ordinary stand-in decides).
+        ``flying``: the goal it sent last is not over; ``resend``: ... and move_base has not acknowledged it within
+        ``ack_timeout``. SEND: send a goal to :attr:`target` (the way back begins); RESEND: send it again;
+        ON_ITS_WAY, WAITING: nothing (driving back; back there, waiting for the link); ARRIVED: the goal ended just
+        now (there, or move_base gave up), it waits there for the link."""
+        if self.goal(now) is None:
+            return None
+        if self.driving:
+            if flying:
+                return RESEND if resend else ON_ITS_WAY
+            self.ended(now)
+            return ARRIVED
+        if self.arrived is not None:
+            return WAITING
+        self.sent()
+        return SEND
 
 
 class Standin:
