@@ -346,3 +346,23 @@ def test_the_watch_keeps_every_change_of_the_violations():
     samples = [(1.0, ['a']), (1.1, ['a']), (1.2, []), (1.3, []), (1.4, ['b']), (1.5, [])]
     assert changes(samples) == [(1.0, ['a']), (1.2, []), (1.4, ['b']), (1.5, [])]
     assert changes([]) == []
+
+
+def test_a_service_proxy_the_master_no_longer_lists_counts_as_not_registered():
+    proxy = sync.Registration('srv', '/move_base/set_parameters', '/cloud/move_base', 'http://c:1/', 'rosrpc://c:2')
+    kept = sync.Registration('srv', '/move_base/make_plan', '/cloud/move_base', 'http://c:1/', 'rosrpc://c:3')
+    topic = sync.Registration('pub', '/odom', '/cloud/move_base', 'http://c:1/', 'nav_msgs/Odometry')
+    owned = {'/cloud/move_base'}
+    # a standby opened the service over the proxy and closed it again: no provider at all
+    snap = sync.Snapshot(services={'/move_base/make_plan': '/cloud/move_base'},
+                         nodes={'/cloud/move_base': 'http://c:1/'})
+    gone, taken = sync.displaced({proxy, kept, topic}, snap, owned)
+    assert gone == {proxy} and taken == {}
+    # a local node registered it after the proxy: it is listed, and it is the newest provider
+    snap.services['/move_base/set_parameters'] = '/move_base'
+    snap.nodes['/move_base'] = 'http://r:5/'
+    gone, taken = sync.displaced({proxy, kept, topic}, snap, owned)
+    assert gone == {proxy} and taken == {'/move_base/set_parameters': '/move_base'}
+    # listed as registered: nothing displaced
+    snap.services['/move_base/set_parameters'] = '/cloud/move_base'
+    assert sync.displaced({proxy, kept, topic}, snap, owned) == (set(), {})

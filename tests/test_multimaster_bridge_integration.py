@@ -196,6 +196,34 @@ def test_service_handover_is_make_before_break(bridged):
     assert call.wait(30) == 0, 'the service vanished when the old provider stopped'
 
 
+STANDBY = ('import rospy\n'
+           'from std_srvs.srv import Empty, EmptyResponse\n'
+           'rospy.init_node("standby")\n'
+           'service = rospy.Service("/rtt/echo", Empty, lambda req: EmptyResponse())\n'
+           'service.shutdown("a standby closes its services until it is active")\n'
+           'print("closed", flush=True)\n'
+           'rospy.spin()\n')
+
+
+def test_a_proxied_service_a_local_node_opened_and_closed_is_served_again(bridged):
+    """A standby on the robot registers a service the cloud's node serves through the proxy and closes it at once
+    (move_base's reconfigure services): rosmaster then lists no provider at all, and the bridge must register its
+    proxy again."""
+    tb, robot, cloud, procs = bridged
+    cloud.run(['rosrun', 'cnr_benchmarks', 'echo_monitor'], 'monitor_cloud')
+    wait_until(lambda: robot.call('lookupService', '/rtt/echo') if '/rtt/echo' in
+               {s for s, _ in robot.call('getSystemState')[2]} else None, 20, 'the cloud service on the robot master')
+    cloud_api = cloud.call('lookupService', '/rtt/echo')
+    standby = robot.run(['/usr/bin/python3', '-c', STANDBY], 'standby')
+    wait_until(lambda: 'closed' in log(standby), 30, 'the standby to open and close its service', standby)
+    wait_until(lambda: '/rtt/echo' in {s for s, _ in robot.call('getSystemState')[2]}
+               and robot.call('lookupService', '/rtt/echo') == cloud_api, 5,
+               "the cloud's service on the robot master again")
+    assert 'service proxies no longer served by the master' in log(procs[0])
+    call = robot.run(['rosservice', 'call', '/rtt/echo', '{seq: 7}'], 'call')
+    assert call.wait(30) == 0, 'the service across does not answer'
+
+
 def test_a_subscriber_hears_the_publishers_of_both_hosts(bridged):
     tb, robot, cloud, _ = bridged
     robot.run(['rostopic', 'pub', '-r', '10', '/chatter', 'std_msgs/String', 'data: robot-side'], 'pub_robot')

@@ -357,6 +357,7 @@ class Bridge:
         self.snapshot = snap
         self.snapshot_stale = False
         owned = self.owned()
+        self._displaced(snap, owned, now)
         self.service_first_seen, ages = sync.service_ages(
             self.service_first_seen, {s: (node, snap.service_apis.get(s, '')) for s, node in snap.services.items()},
             {s: (node, api) for s, (node, api, _) in self.shadowed.items()}, now)
@@ -381,6 +382,20 @@ class Bridge:
                         self._send(peer, 'state', state=export, digest=dig)
         self.local_ages = ages
         self.local_md5s = md5s
+
+    def _displaced(self, snap: sync.Snapshot, owned: Set[str], now: float) -> None:
+        """Service proxies the master no longer lists are counted as not registered (the next reconcile registers
+        them again if they are still wanted); a local node listed over one is the newest provider of its service."""
+        for peer in self.peers.values():
+            gone, taken = sync.displaced(peer.registered, snap, owned)
+            if not gone:
+                continue
+            peer.registered -= gone
+            for service, node in taken.items():
+                self.service_first_seen[(service, node, snap.service_apis.get(service, ''))] = now
+            rospy.loginfo(f'bridge: {peer.peer.name}: {len(gone)} service proxies no longer served by the master '
+                          f'(' + ', '.join(sorted(r.name for r in gone)[:5]) + (', ...' if len(gone) > 5 else '')
+                          + (f'; taken over by a local node: {len(taken)}' if taken else '') + ')')
 
     def _expire(self, now: float) -> None:
         for peer in self.peers.values():

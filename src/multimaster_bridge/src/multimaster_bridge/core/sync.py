@@ -15,7 +15,9 @@ Rules (see the package README):
   whose name is taken by a local node is skipped and reported.
 * **Type and md5 checks**: a remote topic whose type or md5sum differs from the local one is rejected.
 * **Services, newest provider wins**: a service on both hosts is served by the provider registered last,
-  so a module started on the other host takes over before the old one stops (make-before-break).
+  so a module started on the other host takes over before the old one stops (make-before-break). A service
+  proxy the master no longer lists is registered again (:func:`displaced`): a local node that opened the service
+  over it and closed it again (a standby's reconfigure server) left the service with no provider at all.
 * **Forced reconnect**: after a peer was lost, its nodes are registered under the other spelling of their
   URI (with or without the trailing slash). rospy subscribers connect again (they skip a URI they are
   already connected to, even over a dead TCP link) and the publisher drops the stale connection.
@@ -151,6 +153,30 @@ def service_ages(first_seen: Dict[ServiceKey, float], listed: Dict[str, Tuple[st
     keys = {(s,) + p for s, p in listed.items()} | {(s,) + p for s, p in hidden.items()}
     kept = {k: first_seen.get(k, now) for k in keys}
     return kept, {s: now - kept[(s,) + p] for s, p in listed.items()}
+
+
+def displaced(registered: Iterable[Registration], snap: Snapshot,
+              owned: Set[str]) -> Tuple[Set[Registration], Dict[str, str]]:
+    """The service proxies of ``registered`` that ``snap`` (the master after them) no longer lists as providers.
+
+    rosmaster keeps one provider per service: a local node that registers a service a proxy serves takes it over,
+    and when that node unregisters it again (a standby's reconfigure server, opened and closed at start-up) the
+    service is gone from the master although the bridge still counts its proxy as registered. ``owned``: the
+    bridge's proxies. Returns (the proxies no longer listed, to be counted as not registered: those whose service
+    has no provider or another one; service -> the local node listed instead, where one is). A local node listed
+    over a proxy registered it after the proxy, so it is the newest provider (the caller restarts its age)."""
+    gone: Set[Registration] = set()
+    taken: Dict[str, str] = {}
+    for r in registered:
+        if r.kind != 'srv':
+            continue
+        provider = snap.services.get(r.name)
+        if provider == r.caller_id:
+            continue
+        gone.add(r)
+        if provider is not None and provider not in owned and provider in snap.nodes:
+            taken[r.name] = provider
+    return gone, taken
 
 
 def aged_state(state: dict, elapsed: float) -> dict:
