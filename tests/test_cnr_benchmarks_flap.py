@@ -50,14 +50,15 @@ def test_outage_overlap_counts_only_the_part_inside_the_interval():
     assert flap.outage_overlap(events, 15.0, 31.0) == 5.0 + 1.0
 
 
-def write_run(folder, summary, played, restores, logs=()):
+def write_run(folder, summary, played, restores, logs=(), unbroken=None):
     os.makedirs(os.path.join(folder, 'logs', 'instances'), exist_ok=True)
     with open(os.path.join(folder, 'summary.json'), 'w') as f:
         json.dump(summary, f)
     results.write_tsv(os.path.join(folder, 'schedule.tsv'), flap.SCHEDULE_COLUMNS,
                       [[getattr(e, c) for c in flap.SCHEDULE_COLUMNS] for e in played])
     results.write_tsv(os.path.join(folder, 'restore.tsv'), flap.RESTORE_COLUMNS,
-                      [[e.index, e.wall_end, r, ''] for e, r in zip(played, restores)])
+                      [[e.index, e.wall_end, u, r, ''] for e, r, u in
+                       zip(played, restores, restores if unbroken is None else unbroken)])
     for name, text in logs:
         with open(os.path.join(folder, 'logs', name), 'w') as f:
             f.write(text)
@@ -119,3 +120,19 @@ def test_a_restore_the_next_event_cut_short_neither_meets_nor_misses_the_bound(t
     assert (run.not_restored, run.cut_short) == (1, 1)
     assert run.goal_failures() == ['restore max 0.20 s, 1 not restored']
     assert '(1; 1)' in flap.table([run])
+
+
+def test_the_goal_line_times_each_discrepancy_and_the_unbroken_hold_is_shown_beside_it(tmp_path):
+    """Outage 1: every discrepancy gone 0.4 s after the return or after it arose, but a new instance's registrations
+    kept the invariant broken until 2.1 s: the restore is 0.4 s (on the goal line), the unbroken hold 2.1 s. A
+    folder written before the per-discrepancy column gives the unbroken time (its upper bound)."""
+    played = [event(0, 99.0, 105.0), event(1, 120.0, 121.0)]
+    folder = flap.run_folder(str(tmp_path), 'paper_normal+migration', 1)
+    write_run(folder, good_summary(), played, [0.3, 0.4], unbroken=[0.3, 2.1])
+    run = flap.load_run(folder, 'paper_normal+migration', 1)
+    assert run.goal_failures() == [] and run.restore_max == 0.4 and run.unbroken_max == 2.1
+    assert '| 0.35 / 0.40 (0; 0) | 1.20 / 2.10 (0) |' in flap.table([run])
+    old = os.path.join(folder, 'restore.tsv')
+    results.write_tsv(old, ['index', 'wall_end', 'restored_after', 'last_problems'],
+                      [[0, 105.0, 0.3, ''], [1, 121.0, 2.1, '']])
+    assert flap.read_restores(folder) == ([0.3, 2.1], [0.3, 2.1])

@@ -366,3 +366,16 @@ def test_a_service_proxy_the_master_no_longer_lists_counts_as_not_registered():
     # listed as registered: nothing displaced
     snap.services['/move_base/set_parameters'] = '/cloud/move_base'
     assert sync.displaced({proxy, kept, topic}, snap, owned) == (set(), {})
+
+
+def test_each_discrepancy_is_timed_from_the_return_or_from_when_it_arose():
+    """Back at 10.0: ``a`` (there at the return) goes at 10.3; ``b`` arises at 11.0 (the peer registered something
+    new after the return) and goes at 11.4; ``c`` arises at 12.0 and goes at 12.1. The invariant held without a
+    break only from 12.1 on (2.1 s), but no discrepancy lasted longer than 0.4 s."""
+    from multimaster_bridge.watch import longest_lag, restore_times
+    samples = [(10.05, ['a']), (10.3, []), (11.0, ['b']), (11.2, ['b']), (11.4, []), (12.0, ['c']), (12.1, [])]
+    r = restore_times(samples, began=[9.0], ended=[10.0])
+    assert r.restores[0] == pytest.approx(2.1) and r.lags[0] == pytest.approx(0.4)
+    assert longest_lag([(10.05, []), (10.1, [])], 10.0) == 0.0
+    assert longest_lag([(10.05, ['a']), (10.1, ['a'])], 10.0) is None      # still there: not restored
+    assert longest_lag([], 10.0) is None

@@ -11,9 +11,11 @@ plays the same schedule (seed S + i). Configurations (default: all):
   monitoring_cloud, paper_normal, move_base_cloud    the placement, fixed
   ...+migration                                        the same placement, modules managed by migration_manager
   network_aware                                        the network-aware main job (--network-aware)
-While a run plays, both masters are polled (20 Hz) and, per outage, the time from the link's return until each
-holds the other's registrations again is recorded (multimaster_bridge.watch). Per run, in
-bench_results/flap/runs/<config>-<i>/: the mission's report, schedule.tsv, restore.tsv, watch.tsv (every change of the invariant's violations, wall time), the mission's output
+While a run plays, both masters are polled (20 Hz) and, per outage, the restore is recorded (multimaster_bridge.watch):
+each discrepancy between what a master holds of the other's registrations and what it should is timed from the
+link's return, or from when it arose if later, until it is gone; the restore is the longest (and, beside it, the
+time until the invariant held unbroken until the next outage). Per run, in
+bench_results/flap/runs/<config>-<i>/: the mission's report, schedule.tsv, restore.tsv, watch.tsv (every change of the invariant's discrepancies, one per registration, wall time), the mission's output
 (<folder>.log). Resumable: a run whose summary.json exists is kept (--fresh starts over). Then the page
 docs/results/flap/README.md (or DIR) and runs.tsv. About 5 minutes per run.
 """
@@ -146,8 +148,9 @@ def run_one(tb: Testbed, config: str, folder: str, events: List[Outage], port: i
                       [[p[c] for c in core.SCHEDULE_COLUMNS] for p in played])
     restored = watch.results() if watch is not None else None
     results.write_tsv(os.path.join(folder, 'restore.tsv'), core.RESTORE_COLUMNS,
-                      [[i, p['wall_end'], r, '; '.join(problems[:3])] for i, (p, r, problems) in
-                       enumerate(zip(played, restored.restores, restored.last_problems))] if restored else [])
+                      [[i, p['wall_end'], r, lag, '; '.join(problems[:3])] for i, (p, r, lag, problems) in
+                       enumerate(zip(played, restored.restores, restored.lags, restored.last_problems))]
+                      if restored else [])
     if watch is not None:
         to_wall = time.time() - time.monotonic()
         results.write_tsv(os.path.join(folder, 'watch.tsv'), core.WATCH_COLUMNS,

@@ -28,7 +28,7 @@ from typing import Any, Callable, ContextManager, Dict, Iterator, List, Mapping,
 
 import yaml
 
-from multimaster_bridge.core.invariant import Filters, MasterView, Side, proxy_nodes, violations
+from multimaster_bridge.core.invariant import Filters, MasterView, Side, discrepancies, proxy_nodes
 from multimaster_bridge.core.sync import Filter
 
 BridgeCfg = Union[str, Mapping[str, Any], Sequence[Union[str, Mapping[str, Any]]]]
@@ -97,11 +97,12 @@ class MasterReader:
 
 def check(a: Tuple[str, MasterReader, Filters], b: Tuple[str, MasterReader, Filters],
           known: Optional[Dict[str, Dict[str, str]]] = None) -> List[str]:
-    """The invariant's violations between two live masters (``(bridge name, reader, filters)`` each); the URIs are
-    looked up only once the registrations match, and only those not in ``known`` (bridge name -> node -> URI,
-    filled here: a caller that keeps it between checks clears it now and then)."""
+    """The invariant's discrepancies between two live masters (``(bridge name, reader, filters)`` each), one per
+    registration (:func:`multimaster_bridge.core.invariant.discrepancies`); the URIs are looked up only once the
+    registrations match, and only those not in ``known`` (bridge name -> node -> URI, filled here: a caller that
+    keeps it between checks clears it now and then)."""
     sides = [Side(name, MasterView.from_system_state(reader.system_state()), filters) for name, reader, filters in (a, b)]
-    wrong = violations(*sides)
+    wrong = discrepancies(*sides)
     if wrong:
         return wrong
     known = {} if known is None else known
@@ -113,15 +114,23 @@ def check(a: Tuple[str, MasterReader, Filters], b: Tuple[str, MasterReader, Filt
             cache = known.setdefault(side.name, {})
             cache.update(readers[side.name].node_uris(sorted(n for n in names if n not in cache)))
             side.view.uris.update({n: cache[n] for n in names if n in cache})
-    return violations(*sides)
+    return discrepancies(*sides)
 
 
 @dataclass
 class RestoreResults:
-    """Per outage, seconds from the link's return until the invariant held for good (None: it never did before
-    the next outage began or the watch ended)."""
+    """Per outage, two measures of the registrations' return (None: not restored before the next outage began or
+    the watch ended):
+
+    - ``restores``: seconds from the link's return until the invariant held for good (unbroken until the next
+      outage);
+    - ``lags``: the longest any one discrepancy lasted, counted from the link's return, or from when it arose if
+      that was later (the peer registered something after the return, e.g. a module's new instance): how long the
+      bridge took to bring each registration across, whatever else changed meanwhile.
+    """
     restores: List[Optional[float]] = field(default_factory=list)
     last_problems: List[List[str]] = field(default_factory=list)   # per outage: what was wrong last (if anything)
+    lags: List[Optional[float]] = field(default_factory=list)
 
     @property
     def restored(self) -> List[float]:
@@ -249,7 +258,27 @@ def restore_times(samples: List[Tuple[float, List[str]]], began: List[float], en
         window = [s for s in samples if t <= s[0] < window_end]
         out.restores.append(_restore(window, t))
         out.last_problems.append(next((w for _, w in reversed(window) if w), []))
+        out.lags.append(longest_lag(window, t))
     return out
+
+
+def longest_lag(window: List[Tuple[float, List[str]]], t: float) -> Optional[float]:
+    """The longest time one discrepancy of ``window`` (samples after the link returned at ``t``) lasted, from ``t``
+    or from the first sample it appeared in, whichever is later, to the first sample without it (None: one is
+    still there at the window's last sample; 0.0: none at all)."""
+    if not window:
+        return None
+    if window[-1][1]:
+        return None
+    since: Dict[str, float] = {}      # discrepancy -> when it is counted from
+    longest = 0.0
+    for k, (when, wrong) in enumerate(window):
+        now_wrong = set(wrong)
+        for item in [i for i in since if i not in now_wrong]:
+            longest = max(longest, when - since.pop(item))
+        for item in now_wrong:
+            since.setdefault(item, t if k == 0 else when)   # in the first poll: there at the return
+    return longest
 
 
 def changes(samples: List[Tuple[float, List[str]]]) -> List[Tuple[float, List[str]]]:
@@ -273,4 +302,5 @@ def _restore(window: List[Tuple[float, List[str]]], t: float) -> Optional[float]
     return max(0.0, window[first][0] - t)
 
 
-__all__ = ['MasterReader', 'RestoreResults', 'RestoreWatch', 'bridge_filters', 'changes', 'check', 'restore_times']
+__all__ = ['MasterReader', 'RestoreResults', 'RestoreWatch', 'bridge_filters', 'changes', 'check', 'longest_lag',
+           'restore_times']

@@ -3,7 +3,9 @@
 Each run is a two-host mission report folder (``summary.json``, ``placement.tsv``, the migration instances' logs)
 plus what the bench itself wrote beside it: ``schedule.tsv`` (the outage schedule it played, with the wall-clock
 time each event began and ended) and ``restore.tsv`` (per outage, how long after the link returned both masters
-again held each other's registrations). This module turns a folder into a :class:`Run` and runs into the page.
+again held each other's registrations: the longest any one discrepancy lasted, counted from the return or from
+when it arose if later, and the time until the invariant held unbroken). This module turns a folder into a
+:class:`Run` and runs into the page.
 
 Goal line (per run): 0 measurements missing, 0 duplicated, the mission completed (hotspot found), the longest
 standstill with a task pending no longer than the outages it overlaps + 2 s, every restore <= 1 s, at most one
@@ -35,8 +37,8 @@ CONFIGS: Dict[str, Tuple[str, Tuple[str, ...]]] = {
 STANDSTILL_SLACK = 2.0      # s: the robot with a task pending gets a goal within (outage + this)
 RESTORE_GOAL = 1.0          # s: registrations restored this long after the link returns at most
 SCHEDULE_COLUMNS = ['index', 'start', 'duration', 'direction', 'kind', 'loss', 'wall_start', 'wall_end']
-RESTORE_COLUMNS = ['index', 'wall_end', 'restored_after', 'last_problems']
-WATCH_COLUMNS = ['wall', 'holds', 'problems']     # watch.tsv: every change of the invariant's violations
+RESTORE_COLUMNS = ['index', 'wall_end', 'restored_after', 'lag', 'last_problems']
+WATCH_COLUMNS = ['wall', 'holds', 'problems']     # watch.tsv: every change of the invariant's discrepancies
 
 # rospy's console lines: ``[INFO] [<wall time>]: ...``, or ``[INFO] [<wall time>, <sim time>]: ...`` under sim time
 _STAMP = r'\[(?:INFO|WARN|ERROR)\] \[(?P<t>\d+\.\d+)(?:, [\d.]+)?\]: '
@@ -140,11 +142,15 @@ def read_schedule(folder: str) -> List[Event]:
             for r in read_tsv_rows(os.path.join(folder, 'schedule.tsv'))]
 
 
-def read_restores(folder: str) -> List[Optional[float]]:
-    """Per outage, seconds from the link's return until both masters held the peer's registrations again
-    (None: not restored before the next outage or the end)."""
-    return [float(r['restored_after']) if r.get('restored_after') else None
-            for r in read_tsv_rows(os.path.join(folder, 'restore.tsv'))]
+def read_restores(folder: str) -> Tuple[List[Optional[float]], List[Optional[float]]]:
+    """Per outage (None: not restored before the next outage or the end): the restore, the longest any one
+    discrepancy lasted after the link's return or after it arose (``lag``; a folder written before that column
+    gives the next measure, its upper bound), and the time from the return until the invariant held unbroken
+    (``restored_after``)."""
+    rows = read_tsv_rows(os.path.join(folder, 'restore.tsv'))
+    unbroken = [float(r['restored_after']) if r.get('restored_after') else None for r in rows]
+    lags = [(float(r['lag']) if r['lag'] else None) if 'lag' in r else u for r, u in zip(rows, unbroken)]
+    return lags, unbroken
 
 
 def cut_short(restores: Sequence[Optional[float]], events: Sequence['Event']) -> List[bool]:
@@ -202,7 +208,7 @@ class Run:
     outages: int
     standstill: Optional[float]                # s, the longest with a task pending
     standstill_outage: Optional[float]         # s of outage inside that standstill
-    restore_median: Optional[float]
+    restore_median: Optional[float]            # s, per outage the longest one discrepancy lasted (the goal's)
     restore_max: Optional[float]
     not_restored: int                          # outages not restored within RESTORE_GOAL of the link's return
     failovers: int
@@ -211,6 +217,9 @@ class Run:
     wall_time: Optional[float] = None
     restored_at_end: bool = False
     cut_short: int = 0                         # outages whose restore the next event cut short (:func:`cut_short`)
+    unbroken_median: Optional[float] = None    # s, per outage until the invariant held unbroken to the next one
+    unbroken_max: Optional[float] = None
+    unbroken_not_restored: int = 0
 
     @property
     def standstill_excess(self) -> Optional[float]:
@@ -252,7 +261,9 @@ class Run:
                     made=self.made, stored=self.stored, missing=self.missing, duplicated=self.duplicated,
                     outages=self.outages, standstill=self.standstill, standstill_outage=self.standstill_outage,
                     restore_median=self.restore_median, restore_max=self.restore_max,
-                    not_restored=self.not_restored, cut_short=self.cut_short, failovers=self.failovers,
+                    not_restored=self.not_restored, cut_short=self.cut_short,
+                    unbroken_median=self.unbroken_median, unbroken_max=self.unbroken_max,
+                    unbroken_not_restored=self.unbroken_not_restored, failovers=self.failovers,
                     failover_max=max(self.failover_downtimes) if self.failover_downtimes else None,
                     most_active=self.most_active, wall_time=self.wall_time,
                     goal='yes' if not self.goal_failures() else '; '.join(self.goal_failures()))
@@ -287,9 +298,10 @@ def load_run(folder: str, config: str, index: int) -> Optional[Run]:
     except (OSError, ValueError):
         status = None
     check = s.get('store_check') or {}
-    restores = read_restores(folder)
+    restores, unbroken = read_restores(folder)
     done = [r for r in restores if r is not None]
     short = sum(cut_short(restores, events))
+    held = [r for r in unbroken if r is not None]
     standstill, standstill_outage = standstill_of(s, events)
     intervals = read_instance_logs(folder)
     found = []
@@ -305,7 +317,9 @@ def load_run(folder: str, config: str, index: int) -> Optional[Run]:
                [d for d in downtimes if d is not None],
                max(most_active_at_once(intervals).values(), default=0),
                (s.get('two_host') or {}).get('wall_time_total') or s.get('wall_time'),
-               bool(restores) and restores[-1] is not None, short)
+               bool(restores) and restores[-1] is not None, short,
+               percentile(held, 50) if held else None, max(held) if held else None,
+               len(unbroken) - len(held) - sum(cut_short(unbroken, events)) if unbroken else len(events))
 
 
 def _sum(values: Iterable[Optional[float]]) -> Optional[float]:
@@ -316,15 +330,17 @@ def _sum(values: Iterable[Optional[float]]) -> Optional[float]:
 def table(runs: Sequence[Run]) -> str:
     """Markdown: per configuration, the goal line's measures over its runs."""
     lines = ['| configuration | runs (completed) | outages | made / stored | missing | duplicated | '
-             'longest standstill [s] (outage in it) | restore median / max [s] (not restored; cut short) | failovers '
-             '(longest downtime [s]) | most active at once | goal line |',
-             '|---|---|---|---|---|---|---|---|---|---|---|']
+             'longest standstill [s] (outage in it) | restore median / max [s] (not restored; cut short) | '
+             'held unbroken after median / max [s] (not restored) | failovers (longest downtime [s]) | '
+             'most active at once | goal line |',
+             '|---|---|---|---|---|---|---|---|---|---|---|---|']
     for config in CONFIGS:
         rs = [r for r in runs if r.config == config]
         if not rs:
             continue
         worst = max(rs, key=lambda r: (r.standstill_excess if r.standstill_excess is not None else math.inf))
         restores = [r.restore_median for r in rs if r.restore_median is not None]
+        held = [r.unbroken_median for r in rs if r.unbroken_median is not None]
         downs = [d for r in rs for d in r.failover_downtimes]
         met = sum(not r.goal_failures() for r in rs)
         lines.append(
@@ -334,7 +350,10 @@ def table(runs: Sequence[Run]) -> str:
             f'{_sum(r.duplicated for r in rs) if all(r.duplicated is not None for r in rs) else "?"} | '
             f'{_num(worst.standstill)} ({_num(worst.standstill_outage)}) | '
             f'{_num(percentile(restores, 50), 2)} / {_num(max((r.restore_max for r in rs if r.restore_max is not None), default=None), 2)} '
-            f'({sum(r.not_restored for r in rs)}; {sum(r.cut_short for r in rs)}) | {sum(r.failovers for r in rs)} ({_num(max(downs) if downs else None, 2)}) | '
+            f'({sum(r.not_restored for r in rs)}; {sum(r.cut_short for r in rs)}) | '
+            f'{_num(percentile(held, 50), 2)} / {_num(max((r.unbroken_max for r in rs if r.unbroken_max is not None), default=None), 2)} '
+            f'({sum(r.unbroken_not_restored for r in rs)}) | '
+            f'{sum(r.failovers for r in rs)} ({_num(max(downs) if downs else None, 2)}) | '
             f'{max(r.most_active for r in rs)} | {met} of {len(rs)} |')
     return '\n'.join(lines)
 
@@ -347,10 +366,15 @@ def page_body(runs: Sequence[Run], outages: int, seed: int) -> str:
              f'run i of every configuration plays the schedule of seed {seed} + i). The mission goes on after the '
              f'hotspot until the schedule has played. Measures: measurements published on the robot against the '
              f'store at the end (the report\'s store check), the longest time the robot stood still with the '
-             f'mission not done and the outage time inside it, per outage the time from the link\'s return until '
-             f'both masters again held each other\'s registrations as the bridges\' allow-lists permit (polled at '
-             f'20 Hz), failovers of a cloud instance to the robot (migration_manager) and the most instances of a '
-             f'module active at once (from the instances\' logs). An outage not yet restored when the next event '
+             f'mission not done and the outage time inside it, per outage the *restore*: both masters polled at '
+             f'20 Hz, each must hold the other\'s registrations as the bridges\' allow-lists permit, and every '
+             f'discrepancy is timed from the link\'s return until it is gone, or from when it arose if that was '
+             f'later (a registration the peer made after the return: with migration, a module\'s new instance '
+             f'starting on the other host); the restore is the longest of them. Beside it, the time until the '
+             f'invariant held unbroken until the next outage, which also counts registrations made after the return '
+             f'(an upper bound of the restore). Then failovers of a cloud instance to the robot (migration_manager) '
+             f'and the most instances of a module active at once (from the instances\' logs). An outage not yet '
+             f'restored when the next event '
              f'began less than {RESTORE_GOAL:g} s after the link returned is *cut short*: it can neither meet nor miss '
              f'the bound, and the next outage\'s restore covers both.', '',
              f'Goal line per run: 0 missing, 0 duplicated, completed, standstill ≤ its outages + '

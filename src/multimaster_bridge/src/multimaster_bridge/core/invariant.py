@@ -87,22 +87,44 @@ def expected(here: Side, there: Side) -> Set[Entry]:
             if there.filters.passes(e.kind, e.name) and here.filters.passes(e.kind, e.name)}
 
 
-def violations(a: Side, b: Side) -> List[str]:
-    """What is wrong with the registrations across between hosts ``a`` and ``b`` (empty: the invariant holds).
-    A proxy's URI is checked where both views know it."""
-    wrong: List[str] = []
+def _compare(a: Side, b: Side) -> List[Tuple[Side, Side, List[Entry], List[Entry], List[str]]]:
+    """Per master (``here``, ``there``): the peer's entries it lacks, the proxies it has too many of, and its proxies
+    at a URI that is not the node's (checked only where the registrations match and both views know the URI)."""
+    out = []
     for here, there in ((a, b), (b, a)):
         want, have = expected(here, there), proxies(here, there.name)
         missing, extra = sorted(want - have), sorted(have - want)
+        wrong_uri: List[str] = []
+        if not missing and not extra:
+            prefix = _prefix(there.name)
+            for node in sorted({e.node for e in have}):
+                at_there, at_here = there.view.uris.get(node), here.view.uris.get(prefix + node.lstrip('/'))
+                if at_there is not None and at_here is not None and not same_node(at_there, at_here):
+                    wrong_uri.append(f'{prefix}{node.lstrip("/")} at {at_here}, the node is at {at_there}')
+        out.append((here, there, missing, extra, wrong_uri))
+    return out
+
+
+def violations(a: Side, b: Side) -> List[str]:
+    """What is wrong with the registrations across between hosts ``a`` and ``b`` (empty: the invariant holds), one
+    line per master. A proxy's URI is checked where both views know it."""
+    wrong: List[str] = []
+    for here, _, missing, extra, wrong_uri in _compare(a, b):
         if missing or extra:
             wrong.append(f'{here.name} master: missing {_short(missing)}, extra {_short(extra)}')
-            continue
-        prefix = _prefix(there.name)
-        for node in sorted({e.node for e in have}):
-            at_there, at_here = there.view.uris.get(node), here.view.uris.get(prefix + node.lstrip('/'))
-            if at_there is not None and at_here is not None and not same_node(at_there, at_here):
-                wrong.append(f'{here.name} master: {prefix}{node.lstrip("/")} at {at_here}, the node is at {at_there}')
+        wrong.extend(f'{here.name} master: {w}' for w in wrong_uri)
     return wrong
+
+
+def discrepancies(a: Side, b: Side) -> List[str]:
+    """The same as :func:`violations`, one line per registration (``robot master: missing pub /odom /simulator``,
+    ``... extra ...``) or proxy URI: what a watch times one by one."""
+    out: List[str] = []
+    for here, _, missing, extra, wrong_uri in _compare(a, b):
+        out.extend(f'{here.name} master: missing {e.kind} {e.name} {e.node}' for e in missing)
+        out.extend(f'{here.name} master: extra {e.kind} {e.name} {e.node}' for e in extra)
+        out.extend(f'{here.name} master: {w}' for w in wrong_uri)
+    return out
 
 
 def proxy_nodes(side: Side, peer: str) -> Set[str]:
@@ -117,4 +139,5 @@ def _short(entries: List[Entry], limit: int = 12) -> str:
     return f'[{text}{more}]'
 
 
-__all__ = ['Entry', 'Filters', 'MasterView', 'Side', 'expected', 'own', 'proxies', 'proxy_nodes', 'violations']
+__all__ = ['Entry', 'Filters', 'MasterView', 'Side', 'discrepancies', 'expected', 'own', 'proxies', 'proxy_nodes',
+           'violations']
