@@ -506,9 +506,9 @@ def test_a_retired_instance_sleeps_without_its_inputs_and_wakes_to_take_a_goal_o
     inputs = {'/odom', '/tf', '/scan'}
     assert inputs <= node_subscriptions('/move_base'), node_subscriptions('/move_base')
 
-    # a standby cannot sleep (only a frozen instance); frozen, it can
+    # an active instance cannot sleep (only a frozen one or a standby); frozen, it can
     res = driver.controls['robot'](command='sleep')
-    assert not res.ok and 'only a frozen instance' in res.message, res
+    assert not res.ok and 'only a frozen instance or a standby' in res.message, res
     state = driver.freeze(host='robot')
     assert state['goal']['id'] == goal_id
     pid = driver.status.pid
@@ -552,6 +552,27 @@ def test_a_retired_instance_sleeps_without_its_inputs_and_wakes_to_take_a_goal_o
     assert math.hypot(rec.pose[0] - goal_x, rec.pose[1]) <= 0.2
     assert d.alive()
     assert_clean(d, 'D')
+
+
+def test_a_standby_never_promoted_sleeps_and_wakes_ready(world, instances):
+    """The manager's dormant instance from the start (a module placed on the other host): a fresh standby put to
+    sleep closes its inputs in the same process and, woken, is a ready standby again."""
+    from cnr_msgs.msg import InstanceStatus
+    sim, rec, driver = world
+    proc = instances('robot')
+    driver.wait_standby(90, host='robot')
+    pid = driver.status.pid
+    res = driver.controls['robot'](command='sleep')
+    assert res.ok, res.message
+    driver.wait_role('dormant', 10, host='robot')
+    wait_until(lambda: not {'/odom', '/tf', '/scan'} & node_subscriptions('/move_base'), 20, 'the inputs unsubscribed',
+               proc)
+    res = driver.controls['robot'](command='wake')
+    assert res.ok, res.message
+    st = wait_until(lambda: driver.status if driver.status.role == InstanceStatus.STANDBY and driver.status.ready
+                    else None, 30, 'the woken standby ready', proc)
+    assert st.pid == pid and {'/odom', '/tf', '/scan'} <= node_subscriptions('/move_base')
+    assert_clean(proc, 'robot')
 
 
 def test_a_goal_that_arrives_while_the_execute_thread_looks_is_not_left_waiting(ros):

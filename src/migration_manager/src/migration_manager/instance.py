@@ -333,12 +333,14 @@ class ManagedInstance:
             return InstanceControlResponse(ok=False, message=str(exc), term=self.holder.term)
 
     def _sleep_or_wake(self, command: str) -> InstanceControlResponse:
-        """``sleep``: a frozen instance goes dormant; ``wake``: a dormant one becomes a standby (term 0, a fresh
-        lease holder that keeps what it has heard of the module's terms)."""
+        """``sleep``: a frozen instance, or a standby never promoted (the manager's dormant instance from the
+        start), goes dormant; ``wake``: a dormant one becomes a standby (term 0, a fresh lease holder that keeps
+        what it has heard of the module's terms)."""
         with self.lock:
-            if command == 'sleep' and not self.frozen:
+            if command == 'sleep' and not self.frozen and self._role() != 'standby':
                 return InstanceControlResponse(ok=False, term=self.holder.term,
-                                               message=f'only a frozen instance sleeps (this one is {self._role()})')
+                                               message=f'only a frozen instance or a standby sleeps (this one is '
+                                                       f'{self._role()})')
             if command == 'wake' and not self.dormant:
                 return InstanceControlResponse(ok=False, term=self.holder.term,
                                                message=f'not dormant (this one is {self._role()})')

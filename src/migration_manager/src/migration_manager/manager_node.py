@@ -462,9 +462,37 @@ class Manager:
                     if not ok or not res.ok:
                         rospy.logwarn(f'{module}: no warm standby on {other}: '
                                       f'{res if not ok else res.message}')
+                elif other in self.cfg.dormant.get(module, ()) and other != self.books[module].host() \
+                        and agent_up(module, other):
+                    self._start_asleep(module, other)
         threads = [threading.Thread(target=start, args=item, daemon=True) for item in self.initial.items()]
         for t in threads:
             t.start()
+
+    def _start_asleep(self, module: str, host: str) -> None:
+        """A dormant instance of ``module`` on ``host`` from the start: started as a standby, put to sleep once it
+        is ready. A failover there then wakes it instead of starting a clone (move_base under the robot's CPU cap:
+        about 10 s more)."""
+        ok, res = self._call(self.agents[host], 'start', module)
+        if not ok or not res.ok:
+            rospy.logwarn(f'{module}: no dormant instance on {host}: {res if not ok else res.message}')
+            return
+        deadline = time.monotonic() + self.cfg.timeouts.start
+        while not self._instance_up(module, host):
+            if time.monotonic() > deadline or rospy.core.is_shutdown_requested():
+                rospy.logwarn(f'{module}: the instance started on {host} to sleep there was not ready within '
+                              f'{self.cfg.timeouts.start:g} s: left as it is')
+                return
+            time.sleep(0.5)
+        with self.lock:
+            busy = self.books[module].migration is not None
+        if busy:                  # a migration (a failover) may be using it: it is that migration's now
+            return
+        ok, res = self.control[(module, host)].call(command='sleep')
+        if ok and res.ok:
+            rospy.loginfo(f'{module}: an instance on {host} sleeps (dormant) for a failover or migration there')
+        else:
+            rospy.logwarn(f'{module}: the instance on {host} did not go to sleep: {res if not ok else res.message}')
 
     def spin(self) -> None:
         next_announce = time.monotonic()
