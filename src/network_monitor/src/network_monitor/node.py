@@ -30,6 +30,7 @@ from network_monitor.core.estimate import BandwidthEstimator, r_bw
 from network_monitor.core.iface import choose_interface, netifaces_table
 from network_monitor.core.probe import ProbeResult, run_probe
 from network_monitor.core.rate import RateSampler, psutil_reader
+from network_monitor.train_probe import TrainResponder, run_train_probe
 
 
 def resolve_ipv4(address: str) -> str:
@@ -69,6 +70,9 @@ class Monitor:
         self.server: Optional[subprocess.Popen] = None
         if cfg.iperf3_server:
             self.start_server()
+        self.responder: Optional[TrainResponder] = None
+        if cfg.train_server:
+            self.start_responder()
         self.ping_pub = rospy.Publisher(cfg.topic(cfg.name, 'ping'), Header, queue_size=10)
         self.echo_pub = rospy.Publisher(cfg.topic(cfg.peer, 'pong'), Header, queue_size=10)
         self.profile_pub = rospy.Publisher(cfg.topic(cfg.name, 'network_profile'), NetworkProfile, queue_size=5)
@@ -95,6 +99,19 @@ class Monitor:
         except subprocess.TimeoutExpired:
             self.server.kill()
             self.server.wait(2.0)
+
+    # ---------------------------------------------------------------- train responder
+    def start_responder(self) -> None:
+        try:
+            self.responder = TrainResponder.start(self.cfg.train_server_port, self.cfg.train.gap,
+                                                  on_error=rospy.logwarn)
+        except OSError as exc:
+            rospy.logerr(f'network_monitor: cannot answer packet trains on UDP port {self.cfg.train_server_port}: '
+                         f'{exc.strerror or exc}')
+
+    def stop_responder(self) -> None:
+        if self.responder is not None:
+            self.responder.close()
 
     # ---------------------------------------------------------------- echo
     def on_pong(self, msg: Header) -> None:
@@ -141,8 +158,11 @@ class Monitor:
             with self.lock:
                 self.probing = True
                 self.sampler.gap()
-            result = run_probe(self.cfg.peer_address, self.cfg.probe_port, self.cfg.probe,
-                               self.cfg.iperf3_executable)
+            if self.cfg.probe_method == 'train':
+                result = run_train_probe(self.cfg.peer_address, self.cfg.train_port, self.cfg.train)
+            else:
+                result = run_probe(self.cfg.peer_address, self.cfg.probe_port, self.cfg.probe,
+                                   self.cfg.iperf3_executable)
             with self.lock:
                 self.probing = False
                 self.sampler.gap()
@@ -238,6 +258,7 @@ class Monitor:
         finally:
             self.stop.set()
             self.stop_server()
+            self.stop_responder()
 
 
 @exit_on_config_error
@@ -247,4 +268,5 @@ def main() -> None:
     monitor = Monitor(cfg)
     rospy.on_shutdown(monitor.stop.set)
     rospy.on_shutdown(monitor.stop_server)
+    rospy.on_shutdown(monitor.stop_responder)
     monitor.run()

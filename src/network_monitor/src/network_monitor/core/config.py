@@ -7,6 +7,9 @@ from dataclasses import dataclass
 from cnr_params import Section
 from network_monitor.core.estimate import PassiveSettings
 from network_monitor.core.probe import ProbeSettings
+from network_monitor.core.train import MAX_PACKETS, MAX_PAYLOAD, TRAIN_HEADER, TrainSettings
+
+PROBE_METHODS = ('iperf3', 'train')
 
 
 @dataclass
@@ -32,6 +35,11 @@ class MonitorConfig:
     iperf3_executable: str
     iperf3_server: bool
     iperf3_server_port: int
+    probe_method: str           # 'iperf3' | 'train'
+    train: TrainSettings
+    train_port: int
+    train_server: bool
+    train_server_port: int
     passive: PassiveSettings
 
     def topic(self, host: str, leaf: str) -> str:
@@ -73,6 +81,15 @@ def from_section(s: Section) -> MonitorConfig:
         iperf3_executable=s.string('iperf3_executable'),
         iperf3_server=s.boolean('iperf3_server'),
         iperf3_server_port=s.integer('iperf3_server_port', minimum=1, maximum=65535),
+        probe_method=s.string('probe_method', choices=PROBE_METHODS),
+        train=TrainSettings(packets=s.integer('train_packets', minimum=3, maximum=MAX_PACKETS),
+                            packet_bytes=s.integer('train_packet_bytes', minimum=TRAIN_HEADER.size,
+                                                   maximum=MAX_PAYLOAD),
+                            gap=s.number('train_gap', positive=True),
+                            timeout=s.number('probe_timeout', positive=True)),
+        train_port=s.integer('train_port', minimum=1, maximum=65535),
+        train_server=s.boolean('train_server'),
+        train_server_port=s.integer('train_server_port', minimum=1, maximum=65535),
         passive=PassiveSettings(
             fresh=s.number('probe_fresh', nonnegative=True),
             window=s.number('passive_window', positive=True),
@@ -87,6 +104,8 @@ def from_section(s: Section) -> MonitorConfig:
     if cfg.probe.timeout <= cfg.probe.seconds + cfg.probe.omit:
         raise s.error('probe_timeout', f'must be > probe_seconds + probe_omit '
                                        f'({cfg.probe.seconds + cfg.probe.omit} s), got {cfg.probe.timeout:g}')
+    if cfg.train.gap >= cfg.train.timeout:
+        raise s.error('train_gap', f'must be < probe_timeout ({cfg.train.timeout:g} s), got {cfg.train.gap:g}')
     if cfg.c_bw_span < cfg.sample_period:
         raise s.error('c_bw_span', f'must be >= sample_period ({cfg.sample_period:g} s)')
     return cfg
