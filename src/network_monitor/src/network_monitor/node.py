@@ -62,6 +62,7 @@ class Monitor:
         self.probe_bytes = 0
         self.last_probe: Optional[ProbeResult] = None
         address = resolve_ipv4(cfg.peer_address)
+        self.train_address = address or cfg.peer_address     # the train's target: resolved once, here
         table, default = netifaces_table(netifaces)
         choice = choose_interface(address, table, default, cfg.interface)
         self.interface = choice.interface
@@ -159,7 +160,7 @@ class Monitor:
                 self.probing = True
                 self.sampler.gap()
             if self.cfg.probe_method == 'train':
-                result = run_train_probe(self.cfg.peer_address, self.cfg.train_port, self.cfg.train)
+                result = run_train_probe(self.train_address, self.cfg.train_port, self.cfg.train)
             else:
                 result = run_probe(self.cfg.peer_address, self.cfg.probe_port, self.cfg.probe,
                                    self.cfg.iperf3_executable)
