@@ -136,3 +136,6 @@ def test_the_goal_line_times_each_discrepancy_and_the_unbroken_hold_is_shown_bes
     results.write_tsv(old, ['index', 'wall_end', 'restored_after', 'last_problems'],
                       [[0, 105.0, 0.3, ''], [1, 121.0, 2.1, '']])
     assert flap.read_restores(folder) == ([0.3, 2.1], [0.3, 2.1])
+    # no discrepancy after the return (a lag of 0): restored by the first poll, the unbroken time
+    write_run(folder, good_summary(), played, [0.0, 0.4], unbroken=[0.045, 2.1])
+    assert flap.read_restores(folder) == ([0.045, 0.4], [0.045, 2.1])

@@ -265,7 +265,8 @@ def restore_times(samples: List[Tuple[float, List[str]]], began: List[float], en
 def longest_lag(window: List[Tuple[float, List[str]]], t: float) -> Optional[float]:
     """The longest time one discrepancy of ``window`` (samples after the link returned at ``t``) lasted, from ``t``
     or from the first sample it appeared in, whichever is later, to the first sample without it (None: one is
-    still there at the window's last sample; 0.0: none at all)."""
+    still there at the window's last sample). Never less than the first sample's time after ``t`` (the poll's
+    resolution: with no discrepancy at all, the registrations were there by then)."""
     if not window:
         return None
     if window[-1][1]:
@@ -278,7 +279,7 @@ def longest_lag(window: List[Tuple[float, List[str]]], t: float) -> Optional[flo
             longest = max(longest, when - since.pop(item))
         for item in now_wrong:
             since.setdefault(item, t if k == 0 else when)   # in the first poll: there at the return
-    return longest
+    return max(longest, window[0][0] - t)
 
 
 def changes(samples: List[Tuple[float, List[str]]]) -> List[Tuple[float, List[str]]]:

@@ -150,6 +150,8 @@ def read_restores(folder: str) -> Tuple[List[Optional[float]], List[Optional[flo
     rows = read_tsv_rows(os.path.join(folder, 'restore.tsv'))
     unbroken = [float(r['restored_after']) if r.get('restored_after') else None for r in rows]
     lags = [(float(r['lag']) if r['lag'] else None) if 'lag' in r else u for r, u in zip(rows, unbroken)]
+    # no discrepancy at all after the return: restored by the first poll, which the unbroken time is then
+    lags = [u if lag == 0.0 and u is not None else lag for lag, u in zip(lags, unbroken)]
     return lags, unbroken
 
 
