@@ -139,3 +139,24 @@ def test_the_goal_line_times_each_discrepancy_and_the_unbroken_hold_is_shown_bes
     # no discrepancy after the return (a lag of 0): restored by the first poll, the unbroken time
     write_run(folder, good_summary(), played, [0.0, 0.4], unbroken=[0.045, 2.1])
     assert flap.read_restores(folder) == ([0.045, 0.4], [0.045, 2.1])
+
+
+def test_an_outage_whose_open_discrepancies_arose_just_before_the_next_event_is_cut_short(tmp_path):
+    """Outage 0 returns at 105.0 and is not restored when the next event begins at 120.0: by watch.tsv (every change)
+    its open discrepancy ``c`` arose after 119.6, less than 1 s before: cut short. Outage 1 returns at 121.0, not
+    restored when the next event begins at 130.0, ``d`` open since 121.5: a miss."""
+    played = [event(0, 99.0, 105.0), event(1, 120.0, 121.0), event(2, 130.0, 131.0)]
+    folder = flap.run_folder(str(tmp_path), 'paper_normal+migration', 1)
+    write_run(folder, good_summary(), played, ['', '', 0.04])
+    results.write_tsv(os.path.join(folder, 'watch.tsv'), flap.WATCH_COLUMNS,
+                      [[100.0, 0, 'robot master: missing pub /a /n'], [105.3, 1, ''],
+                       [110.0, 0, 'robot master: missing pub /b /n'], [119.6, 1, ''],
+                       [119.9, 0, 'cloud master: extra sub /c /n'], [121.2, 1, ''],
+                       [121.5, 0, 'robot master: missing srv /d /n'], [131.5, 1, '']])
+    lags, unbroken, short = flap.restores_of(folder, played)
+    assert lags == [None, None, 0.04] and short == [True, False, False]
+    run = flap.load_run(folder, 'paper_normal+migration', 1)
+    assert (run.not_restored, run.cut_short) == (1, 1)
+    # the same without watch.tsv: only the next event's start decides (5 s and 9 s after the returns: misses)
+    os.remove(os.path.join(folder, 'watch.tsv'))
+    assert flap.restores_of(folder, played)[2] == [False, False, False]

@@ -369,13 +369,26 @@ def test_a_service_proxy_the_master_no_longer_lists_counts_as_not_registered():
 
 
 def test_each_discrepancy_is_timed_from_the_return_or_from_when_it_arose():
-    """Back at 10.0: ``a`` (there at the return) goes at 10.3; ``b`` arises at 11.0 (the peer registered something
-    new after the return) and goes at 11.4; ``c`` arises at 12.0 and goes at 12.1. The invariant held without a
-    break only from 12.1 on (2.1 s), but no discrepancy lasted longer than 0.4 s."""
-    from multimaster_bridge.watch import longest_lag, restore_times
-    samples = [(10.05, ['a']), (10.3, []), (11.0, ['b']), (11.2, ['b']), (11.4, []), (12.0, ['c']), (12.1, [])]
+    """Back at 10.0: ``a`` (there at the return) goes at 10.3; ``b`` arises after 10.95 (the peer registered
+    something new after the return) and goes at 11.4; ``c`` arises after 11.95 and goes at 12.1. The invariant held
+    without a break only from 12.1 on (2.1 s), but no discrepancy lasted longer than 0.45 s."""
+    from multimaster_bridge.core.restore import changes, discrepancy_restore, unbroken_restore
+    from multimaster_bridge.watch import restore_times
+    samples = [(9.5, ['a']), (10.05, ['a']), (10.3, []), (10.95, []), (11.0, ['b']), (11.2, ['b']), (11.4, []),
+               (11.95, []), (12.0, ['c']), (12.1, [])]
     r = restore_times(samples, began=[9.0], ended=[10.0])
-    assert r.restores[0] == pytest.approx(2.1) and r.lags[0] == pytest.approx(0.4)
-    assert longest_lag([(10.05, []), (10.1, [])], 10.0) == pytest.approx(0.05)     # the poll's resolution
-    assert longest_lag([(10.05, ['a']), (10.1, ['a'])], 10.0) is None      # still there: not restored
-    assert longest_lag([], 10.0) is None
+    # b: last seen absent at 10.95, gone at 11.4: 0.45 s
+    assert r.restores[0] == pytest.approx(2.1) and r.lags[0] == pytest.approx(0.45)
+    # from the changes only (what watch.tsv keeps) a discrepancy counts from the change before: an overestimate
+    record = changes(samples)
+    assert discrepancy_restore(record, 10.0) == (pytest.approx(1.1), 0.0)      # b: from 10.3 to 11.4
+    assert unbroken_restore(record, 10.0) == pytest.approx(2.1)
+    # none after the return: 0 (the watch then reports its first poll after the return)
+    assert discrepancy_restore([(9.5, []), (11.0, [])], 10.0) == (0.0, 0.0)
+    assert restore_times([(9.5, []), (10.05, []), (10.1, [])], [9.0], [10.0]).lags == [pytest.approx(0.05)]
+    # still there when the next outage begins: open, with its age then
+    lag, open_age = discrepancy_restore(record, 10.0, window_end=12.05)
+    assert lag is None and open_age == pytest.approx(0.65)                     # c: from the change at 11.4
+    assert discrepancy_restore(samples, 10.0, window_end=12.05) == (None, pytest.approx(0.1))   # from 11.95
+    assert unbroken_restore(record, 10.0, window_end=12.05) is None
+    assert discrepancy_restore([(9.5, ['a'])], 10.0, window_end=13.0) == (None, 3.0)

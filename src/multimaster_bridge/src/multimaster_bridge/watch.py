@@ -19,6 +19,7 @@ Times are ``time.monotonic()``.
 from __future__ import annotations
 
 import contextlib
+import math
 import statistics
 import threading
 import time
@@ -28,6 +29,7 @@ from typing import Any, Callable, ContextManager, Dict, Iterator, List, Mapping,
 
 import yaml
 
+from multimaster_bridge.core import restore
 from multimaster_bridge.core.invariant import Filters, MasterView, Side, discrepancies, proxy_nodes
 from multimaster_bridge.core.sync import Filter
 
@@ -230,8 +232,11 @@ class RestoreWatch:
         """Seconds from ``t`` to the first poll of the current unbroken run of holding polls, if the last poll
         held and that run started after ``t`` began to be watched (None otherwise)."""
         with self._lock:
-            samples = [s for s in self._samples if s[0] >= t]
-        return _restore(samples, t)
+            samples = list(self._samples)
+        if not samples or samples[-1][0] < t:
+            return None
+        unbroken = restore.unbroken_restore(samples, t)
+        return None if unbroken is None else max(unbroken, next(s[0] for s in samples if s[0] >= t) - t)
 
     def problems(self) -> List[str]:
         with self._lock:
@@ -250,58 +255,24 @@ class RestoreWatch:
 
 
 def restore_times(samples: List[Tuple[float, List[str]]], began: List[float], ended: List[float]) -> RestoreResults:
-    """Per link return in ``ended``: seconds until the invariant held for good within its window, which lasts until
-    the next outage in ``began`` (or the last sample). ``samples``: (time, violations) in time order."""
+    """Per link return in ``ended``: the two measures of :mod:`multimaster_bridge.core.restore` within its window,
+    which lasts until the next outage in ``began`` (or the last sample). ``samples``: (time, discrepancies) of every
+    poll, in time order. A poll's time is when it ended, so neither measure is below the first poll after the
+    return (the watch's resolution)."""
     out = RestoreResults()
     for t in ended:
-        window_end = min((b for b in began if b >= t), default=float('inf'))
+        window_end = min((b for b in began if b >= t), default=math.inf)
         window = [s for s in samples if t <= s[0] < window_end]
-        out.restores.append(_restore(window, t))
+        floor = window[0][0] - t if window else 0.0
+        unbroken = restore.unbroken_restore(samples, t, window_end)
+        lag, _ = restore.discrepancy_restore(samples, t, window_end)
+        out.restores.append(None if unbroken is None or not window else max(unbroken, floor))
+        out.lags.append(None if lag is None or not window else max(lag, floor))
         out.last_problems.append(next((w for _, w in reversed(window) if w), []))
-        out.lags.append(longest_lag(window, t))
     return out
 
 
-def longest_lag(window: List[Tuple[float, List[str]]], t: float) -> Optional[float]:
-    """The longest time one discrepancy of ``window`` (samples after the link returned at ``t``) lasted, from ``t``
-    or from the first sample it appeared in, whichever is later, to the first sample without it (None: one is
-    still there at the window's last sample). Never less than the first sample's time after ``t`` (the poll's
-    resolution: with no discrepancy at all, the registrations were there by then)."""
-    if not window:
-        return None
-    if window[-1][1]:
-        return None
-    since: Dict[str, float] = {}      # discrepancy -> when it is counted from
-    longest = 0.0
-    for k, (when, wrong) in enumerate(window):
-        now_wrong = set(wrong)
-        for item in [i for i in since if i not in now_wrong]:
-            longest = max(longest, when - since.pop(item))
-        for item in now_wrong:
-            since.setdefault(item, t if k == 0 else when)   # in the first poll: there at the return
-    return max(longest, window[0][0] - t)
+changes = restore.changes
 
 
-def changes(samples: List[Tuple[float, List[str]]]) -> List[Tuple[float, List[str]]]:
-    """The samples whose violations differ from the sample before (the first one too)."""
-    out: List[Tuple[float, List[str]]] = []
-    for t, wrong in samples:
-        if not out or wrong != out[-1][1]:
-            out.append((t, wrong))
-    return out
-
-
-def _restore(window: List[Tuple[float, List[str]]], t: float) -> Optional[float]:
-    """Seconds from ``t`` to the first sample from which every sample of ``window`` holds (None: the last does
-    not). A sample's time is when its poll ended, so the poll before it bounds the restore from below: the
-    reported time is that of the first holding poll's end."""
-    if not window or window[-1][1]:
-        return None
-    first = len(window) - 1
-    while first > 0 and not window[first - 1][1]:
-        first -= 1
-    return max(0.0, window[first][0] - t)
-
-
-__all__ = ['MasterReader', 'RestoreResults', 'RestoreWatch', 'bridge_filters', 'changes', 'check', 'longest_lag',
-           'restore_times']
+__all__ = ['MasterReader', 'RestoreResults', 'RestoreWatch', 'bridge_filters', 'changes', 'check', 'restore_times']

@@ -4,8 +4,9 @@ Each run is a two-host mission report folder (``summary.json``, ``placement.tsv`
 plus what the bench itself wrote beside it: ``schedule.tsv`` (the outage schedule it played, with the wall-clock
 time each event began and ended) and ``restore.tsv`` (per outage, how long after the link returned both masters
 again held each other's registrations: the longest any one discrepancy lasted, counted from the return or from
-when it arose if later, and the time until the invariant held unbroken). This module turns a folder into a
-:class:`Run` and runs into the page.
+when it arose if later, and the time until the invariant held unbroken), with ``watch.tsv`` (every change of the
+discrepancies, one per registration) to tell an outage the next event cut short (:mod:`multimaster_bridge.core.restore`). This module turns a
+folder into a :class:`Run` and runs into the page.
 
 Goal line (per run): 0 measurements missing, 0 duplicated, the mission completed (hotspot found), the longest
 standstill with a task pending no longer than the outages it overlaps + 2 s, every restore <= 1 s, at most one
@@ -22,6 +23,7 @@ from dataclasses import dataclass, field
 from typing import Dict, Iterable, List, Optional, Sequence, Tuple
 
 from cnr_benchmarks.core.stats import percentile
+from multimaster_bridge.core import restore
 
 # configuration -> (placement, run_mission options besides --two-host --placement). The network-aware main job
 # is --network-aware (which implies --migration; its decider places the patrol task's modules itself).
@@ -143,16 +145,43 @@ def read_schedule(folder: str) -> List[Event]:
 
 
 def read_restores(folder: str) -> Tuple[List[Optional[float]], List[Optional[float]]]:
-    """Per outage (None: not restored before the next outage or the end): the restore, the longest any one
-    discrepancy lasted after the link's return or after it arose (``lag``; a folder written before that column
-    gives the next measure, its upper bound), and the time from the return until the invariant held unbroken
-    (``restored_after``)."""
+    """Per outage, as the bench recorded them at run time (None: not restored before the next outage or the end):
+    the restore per discrepancy (``lag``; a folder written before that column gives the next measure, its upper
+    bound) and the time until the invariant held unbroken (``restored_after``)."""
     rows = read_tsv_rows(os.path.join(folder, 'restore.tsv'))
     unbroken = [float(r['restored_after']) if r.get('restored_after') else None for r in rows]
     lags = [(float(r['lag']) if r['lag'] else None) if 'lag' in r else u for r, u in zip(rows, unbroken)]
     # no discrepancy at all after the return: restored by the first poll, which the unbroken time is then
     lags = [u if lag == 0.0 and u is not None else lag for lag, u in zip(lags, unbroken)]
     return lags, unbroken
+
+
+def read_watch(folder: str) -> Optional[List[Tuple[float, List[str]]]]:
+    """``watch.tsv``: every change of the discrepancies (wall time, one discrepancy per registration), or None
+    without it (or when it names them one line per master: it cannot time them one by one)."""
+    rows = read_tsv_rows(os.path.join(folder, 'watch.tsv'))
+    record = [(float(r['wall']), r['problems'].split('; ') if r.get('problems') else []) for r in rows]
+    if not record or any(', extra [' in p for _, wrong in record for p in wrong):
+        return None
+    return record
+
+
+def restores_of(folder: str, events: Sequence['Event']) -> Tuple[List[Optional[float]], List[Optional[float]],
+                                                                 List[bool]]:
+    """Per outage: the restore per discrepancy and the unbroken restore as recorded at run time (``restore.tsv``,
+    timed on every poll; None: not restored), and whether the outage was cut short: the next event began less than
+    RESTORE_GOAL after the return (:func:`cut_short`), or, from ``watch.tsv`` where it names the discrepancies one
+    by one, those still open when it began had arisen less than RESTORE_GOAL before (counted from the change before
+    the one that first shows them: an overestimate, never a cut too many)."""
+    lags, unbroken = read_restores(folder)
+    short = cut_short(lags, events)
+    record = read_watch(folder)
+    if record is not None and len(lags) == len(events):
+        for i, e in enumerate(events[:-1]):
+            if lags[i] is None and not short[i]:
+                _, open_age = restore.discrepancy_restore(record, e.wall_end, events[i + 1].wall_start)
+                short[i] = open_age < RESTORE_GOAL
+    return lags, unbroken, short
 
 
 def cut_short(restores: Sequence[Optional[float]], events: Sequence['Event']) -> List[bool]:
@@ -300,9 +329,9 @@ def load_run(folder: str, config: str, index: int) -> Optional[Run]:
     except (OSError, ValueError):
         status = None
     check = s.get('store_check') or {}
-    restores, unbroken = read_restores(folder)
+    restores, unbroken, cut = restores_of(folder, events)
     done = [r for r in restores if r is not None]
-    short = sum(cut_short(restores, events))
+    short = sum(cut)
     held = [r for r in unbroken if r is not None]
     standstill, standstill_outage = standstill_of(s, events)
     intervals = read_instance_logs(folder)
@@ -377,7 +406,8 @@ def page_body(runs: Sequence[Run], outages: int, seed: int) -> str:
              f'(an upper bound of the restore). Then failovers of a cloud instance to the robot (migration_manager) '
              f'and the most instances of a module active at once (from the instances\' logs). An outage not yet '
              f'restored when the next event '
-             f'began less than {RESTORE_GOAL:g} s after the link returned is *cut short*: it can neither meet nor miss '
+             f'began less than {RESTORE_GOAL:g} s after the link returned, or whose open discrepancies arose less '
+             f'than {RESTORE_GOAL:g} s before the next event began, is *cut short*: it can neither meet nor miss '
              f'the bound, and the next outage\'s restore covers both.', '',
              f'Goal line per run: 0 missing, 0 duplicated, completed, standstill ≤ its outages + '
              f'{STANDSTILL_SLACK:g} s, restore ≤ {RESTORE_GOAL:g} s, at most 1 active.', '', table(runs), '']
