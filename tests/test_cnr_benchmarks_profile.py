@@ -65,3 +65,61 @@ def test_tsv_round_trip_and_report(tmp_path):
     assert 'Baseline RTT' in text and '**0.65 ms**' in text and '1.5 min' in text and 'test machine' in text
     assert '| 150 | 1 | 152.90 [152.80, 153.00] | +2.25 [+2.15, +2.35] | +0.40 [+0.30, +0.50] |' in text
     assert 'A_bw ±10 % in 1/3' in text and '(1 failed)' in text
+
+
+def test_the_page_names_the_probe_method(tmp_path):
+    from cnr_benchmarks.profile_bench import write_outputs
+    from cnr_benchmarks.report import TsvLog
+    log = TsvLog(str(tmp_path / 'profile.tsv'), core.Sample.columns())
+    for s in SAMPLES:
+        log.row(**vars(s))
+    log.close()
+    train = write_outputs(str(tmp_path / 'profile.tsv'), str(tmp_path / 'train'),
+                          'launch_scripts/bench_profile.sh --probe-method train', datetime.datetime(2026, 1, 2, 3, 4),
+                          90.0, 'test machine', 'train')
+    assert 'packet-train probe' in train.splitlines()[0] and 'Probe method: **train**' in train
+    assert '60 × 1472 B = 88 KB' in train and 'iperf3 -t' not in train
+    iperf3 = write_outputs(str(tmp_path / 'profile.tsv'), str(tmp_path / 'iperf3'), 'launch_scripts/bench_profile.sh',
+                           datetime.datetime(2026, 1, 2, 3, 4), 90.0, 'test machine', 'iperf3')
+    assert 'iperf3 probe' in iperf3.splitlines()[0] and 'Probe method: **iperf3**' in iperf3
+    assert 'iperf3 -t 2 -O 2, at most 50 MB' in iperf3
+
+
+def test_options_default_to_the_configured_method_and_its_page():
+    from cnr_benchmarks import results
+    from cnr_benchmarks.profile_bench import configured_probe_method, parse_args
+    configured = configured_probe_method()
+    _, args = parse_args([])
+    assert args.probe_method == configured and args.reps == 2
+    assert args.out == results.results_dir('profile' if configured == 'iperf3' else 'profile_train')
+    _, args = parse_args(['--probe-method', 'train', '--quick'])
+    assert args.probe_method == 'train' and args.reps == 1 and args.out == results.results_dir('profile_train')
+    _, args = parse_args(['--probe-method', 'iperf3'])
+    assert args.out == results.results_dir('profile')
+    _, args = parse_args(['--probe-method', 'train', '--out', '/tmp/elsewhere'])
+    assert args.out == '/tmp/elsewhere'
+
+
+@pytest.mark.parametrize('argv', [['--probe-method', 'ping'], ['--reps', '0']])
+def test_bad_options_exit_2(argv, capsys):
+    from cnr_benchmarks.profile_bench import parse_args
+    with pytest.raises(SystemExit) as exc:
+        parse_args(argv)
+    assert exc.value.code == 2 and len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+@pytest.mark.parametrize('method', ['iperf3', 'train'])
+def test_monitor_overlays(method):
+    from cnr_params import Section, load_yaml
+    from network_monitor.core.config import from_section
+    from cnr_benchmarks.profile_bench import monitor_config_path, monitor_overlays
+    overlays = monitor_overlays(method, '10.9.0.1', '10.9.0.2')
+    assert overlays['robot'] == dict(probe_interval=0.0, probe_method=method, peer_address='10.9.0.2')
+    cloud = dict(probe_interval=0.0, probe_method=method, name='cloud', peer='robot', peer_address='10.9.0.1')
+    if method == 'train':
+        cloud['train_server'] = True          # the robot's monitor probes the cloud's responder
+    assert overlays['cloud'] == cloud
+    base = load_yaml(monitor_config_path())
+    configs = {side: from_section(Section(dict(base, **overlay), side)) for side, overlay in overlays.items()}
+    assert configs['robot'].probe_method == configs['cloud'].probe_method == method
+    assert configs['cloud'].train_server == (method == 'train')

@@ -11,9 +11,11 @@ RTT/2 and the rate on both directions), then per repetition:
 1. RTT: waits for a profile of the robot's monitor stamped at least ``window`` s (the monitor's echo window,
    read from its parameters) after the link was set or the last traffic stopped, so that every ping in the
    window saw the new setting and an idle link; takes its ``rtt`` (median) and ``rtt_spread``.
-2. probe: ``~profile_now`` with ``probe: true``; A_bw from the answer, the caller's wall time, the bytes
-   iperf3 reports (``probe_bytes`` difference) and the bytes the emulator delivered in each direction
-   meanwhile (its ``bytes_delivered`` counters; pings and bridge heartbeats, a few kB/s, included).
+2. probe: ``~profile_now`` with ``probe: true`` (the monitor's ``probe_method``: an iperf3 stream or a packet
+   train); A_bw from the answer, the caller's wall time, the bytes the probe reports sent (the profile's
+   ``probe_bytes`` difference: iperf3's count or the train's packets) and the bytes the emulator delivered in
+   each direction meanwhile (its ``bytes_delivered`` counters; pings and bridge heartbeats, a few kB/s,
+   included).
 3. passive (shaped cells only): publishes ``load_fraction`` x rate as ``load_hz`` messages per second on
    ``/bench_profile/load`` (std_msgs/UInt8MultiArray, to the sink on the cloud, across the bridge) from the end
    of the probe, and takes the first profile whose ``a_bw_age`` is at least ``passive_age`` s.
