@@ -515,8 +515,9 @@ class Bridge:
         q_period = 1.0 / self.cfg.quality_rate
         rospy.loginfo(f'bridge {self.cfg.name}: listening on {self.cfg.listen[0]}:{self.cfg.listen[1]}, '
                       f'peers ' + ', '.join(f'{p.name}@{p.host}:{p.port}' for p in self.cfg.peers))
+        threading.Thread(target=self.heartbeat_loop, args=(hb_period,), name='bridge-heartbeat', daemon=True).start()
         try:
-            self._loop(period, hb_period, q_period)
+            self._loop(period, q_period)
         finally:
             self.shutdown()
 
@@ -524,19 +525,28 @@ class Bridge:
         """rospy.on_shutdown hook: end spin(), which then removes the registrations.
 
         Only a flag: the hook may run in a signal handler inside any lock of the main thread (even the
-        wake event's own); the loop waits at most one heartbeat period, so it sees the flag within that.
+        wake event's own); the loop waits at most one poll period, so it sees the flag within that.
         """
         self.closing = True
 
-    def _loop(self, period: float, hb_period: float, q_period: float) -> None:
-        next_poll = next_hb = next_q = time.monotonic()
+    def heartbeat_loop(self, period: float) -> None:
+        """Heartbeats on a thread of their own, every ``period`` s until the bridge closes. The sync loop waits on
+        its master: re-registering a peer's nodes on a busy master (the CPU-capped robot's) can take longer than
+        the peer's loss timeout, and heartbeats sent from that loop would then make the peer take us for lost."""
+        next_hb = time.monotonic()
+        while not rospy.is_shutdown() and not self.closing:
+            with self.lock:
+                if self.closing:          # after the goodbye, no heartbeat may say we are back
+                    return
+                for peer in self.peers.values():
+                    self._heartbeat(peer)
+            next_hb = max(next_hb + period, time.monotonic())
+            time.sleep(max(0.0, next_hb - time.monotonic()))
+
+    def _loop(self, period: float, q_period: float) -> None:
+        next_poll = next_q = time.monotonic()
         while not rospy.is_shutdown() and not self.closing:
             now = time.monotonic()
-            if now >= next_hb:
-                next_hb = max(next_hb + hb_period, now)
-                with self.lock:
-                    for peer in self.peers.values():
-                        self._heartbeat(peer)
             try:
                 if now >= next_poll or self.wake.is_set():
                     self.wake.clear()
@@ -558,7 +568,7 @@ class Bridge:
             if now >= next_q:
                 next_q = max(next_q + q_period, now)
                 self.publish_quality()
-            self.wake.wait(max(0.0, min(next_poll, next_hb, next_q) - time.monotonic()))
+            self.wake.wait(max(0.0, min(next_poll, next_q) - time.monotonic()))
 
     def shutdown(self) -> None:
         """Say goodbye and remove every registration this bridge made (called by spin() as it ends)."""
