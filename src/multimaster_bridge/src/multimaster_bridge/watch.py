@@ -233,10 +233,7 @@ class RestoreWatch:
         held and that run started after ``t`` began to be watched (None otherwise)."""
         with self._lock:
             samples = list(self._samples)
-        if not samples or samples[-1][0] < t:
-            return None
-        unbroken = restore.unbroken_restore(samples, t)
-        return None if unbroken is None else max(unbroken, next(s[0] for s in samples if s[0] >= t) - t)
+        return _at_poll_resolution(samples, t, math.inf, restore.unbroken_restore(samples, t))
 
     def problems(self) -> List[str]:
         with self._lock:
@@ -263,13 +260,20 @@ def restore_times(samples: List[Tuple[float, List[str]]], began: List[float], en
     for t in ended:
         window_end = min((b for b in began if b >= t), default=math.inf)
         window = [s for s in samples if t <= s[0] < window_end]
-        floor = window[0][0] - t if window else 0.0
-        unbroken = restore.unbroken_restore(samples, t, window_end)
-        lag, _ = restore.discrepancy_restore(samples, t, window_end)
-        out.restores.append(None if unbroken is None or not window else max(unbroken, floor))
-        out.lags.append(None if lag is None or not window else max(lag, floor))
+        out.restores.append(_at_poll_resolution(samples, t, window_end,
+                                                restore.unbroken_restore(samples, t, window_end)))
+        out.lags.append(_at_poll_resolution(samples, t, window_end,
+                                            restore.discrepancy_restore(samples, t, window_end)[0]))
         out.last_problems.append(next((w for _, w in reversed(window) if w), []))
     return out
+
+
+def _at_poll_resolution(samples: List[Tuple[float, List[str]]], t: float, window_end: float,
+                        measure: Optional[float]) -> Optional[float]:
+    """``measure`` of the return at ``t``, never below the first poll after ``t`` (a poll's time is when it ended);
+    None without one before ``window_end``."""
+    first = next((s[0] for s in samples if t <= s[0] < window_end), None)
+    return None if measure is None or first is None else max(measure, first - t)
 
 
 changes = restore.changes

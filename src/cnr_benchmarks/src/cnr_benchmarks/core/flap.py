@@ -5,8 +5,8 @@ plus what the bench itself wrote beside it: ``schedule.tsv`` (the outage schedul
 time each event began and ended) and ``restore.tsv`` (per outage, how long after the link returned both masters
 again held each other's registrations: the longest any one discrepancy lasted, counted from the return or from
 when it arose if later, and the time until the invariant held unbroken), with ``watch.tsv`` (every change of the
-discrepancies, one per registration) to tell an outage the next event cut short (:mod:`multimaster_bridge.core.restore`). This module turns a
-folder into a :class:`Run` and runs into the page.
+discrepancies, one per registration) to tell an outage the next event cut short
+(:mod:`multimaster_bridge.core.restore`). This module turns a folder into a :class:`Run` and runs into the page.
 
 Goal line (per run): 0 measurements missing, 0 duplicated, the mission completed (hotspot found), the longest
 standstill with a task pending no longer than the outages it overlaps + 2 s, every restore <= 1 s, at most one
@@ -358,6 +358,10 @@ def _sum(values: Iterable[Optional[float]]) -> Optional[float]:
     return sum(v) if v else None
 
 
+def _max(values: Iterable[Optional[float]]) -> Optional[float]:
+    return max((x for x in values if x is not None), default=None)
+
+
 def table(runs: Sequence[Run]) -> str:
     """Markdown: per configuration, the goal line's measures over its runs."""
     lines = ['| configuration | runs (completed) | outages | made / stored | missing | duplicated | '
@@ -380,9 +384,9 @@ def table(runs: Sequence[Run]) -> str:
             f'{_sum(r.missing for r in rs) if all(r.missing is not None for r in rs) else "?"} | '
             f'{_sum(r.duplicated for r in rs) if all(r.duplicated is not None for r in rs) else "?"} | '
             f'{_num(worst.standstill)} ({_num(worst.standstill_outage)}) | '
-            f'{_num(percentile(restores, 50), 2)} / {_num(max((r.restore_max for r in rs if r.restore_max is not None), default=None), 2)} '
+            f'{_num(percentile(restores, 50), 2)} / {_num(_max(r.restore_max for r in rs), 2)} '
             f'({sum(r.not_restored for r in rs)}; {sum(r.cut_short for r in rs)}) | '
-            f'{_num(percentile(held, 50), 2)} / {_num(max((r.unbroken_max for r in rs if r.unbroken_max is not None), default=None), 2)} '
+            f'{_num(percentile(held, 50), 2)} / {_num(_max(r.unbroken_max for r in rs), 2)} '
             f'({sum(r.unbroken_not_restored for r in rs)}) | '
             f'{sum(r.failovers for r in rs)} ({_num(max(downs) if downs else None, 2)}) | '
             f'{max(r.most_active for r in rs)} | {met} of {len(rs)} |')

@@ -8,8 +8,9 @@ measures per outage, both from the link's return at ``t`` within the window that
 - :func:`discrepancy_restore`: each discrepancy timed from ``t``, or from when it arose if later (the peer
   registered something after the return, e.g. a module's new instance), until it is gone; the restore is the
   longest. When it arose is taken as the entry before the one that first shows it (when it was last seen absent):
-  exact to one poll for a record of every poll, an overestimate for a record of changes only. A discrepancy still there when the window ends is open: the outage is not restored, unless it arose
-  less than the bound before the window ended (then the next outage cut it short: it can neither meet nor miss it).
+  exact to one poll for a record of every poll, an overestimate for a record of changes only. A discrepancy still
+  there when the window ends is open: the outage is not restored, unless it arose less than the bound before the
+  window ended (then the next outage cut it short: it can neither meet nor miss it).
 - :func:`unbroken_restore`: from ``t`` until the invariant held without a break to the window's end.
 """
 from __future__ import annotations
@@ -38,8 +39,9 @@ def _at(record: Record, t: float) -> Tuple[List[str], List[Tuple[float, List[str
 
 def discrepancy_restore(record: Record, t: float, window_end: float = math.inf) -> Tuple[Optional[float], float]:
     """(restore, open age): the longest any discrepancy lasted, counted from ``t`` or from when it arose if later
-    (the entry before the first that shows it), to the entry without it (None if one is still there at ``window_end``, or at the record's end for an endless
-    window), and how long the oldest of those still there at the window's end had been there (0.0: none)."""
+    (the entry before the first that shows it), to the entry without it (None if one is still there at
+    ``window_end``, or at the record's end for an endless window), and how long the oldest of those still there at
+    the window's end had been there (0.0: none)."""
     holding, after = _at(record, t)
     since: Dict[str, float] = {item: t for item in holding}
     longest = 0.0
