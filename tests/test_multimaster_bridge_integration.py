@@ -236,11 +236,20 @@ def test_a_subscriber_hears_the_publishers_of_both_hosts(bridged):
                  f'the {side.side} subscriber to hear both publishers')
 
 
+# a typed subscriber: `rostopic echo` waits until the topic has a publisher before it subscribes, so it
+# would depend on an earlier test having published /chatter on this master
+SUBSCRIBER = ('import rospy\n'
+              'from std_msgs.msg import String\n'
+              'rospy.init_node("subscriber_only")\n'
+              'rospy.Subscriber("/chatter", String, lambda msg: None)\n'
+              'rospy.spin()\n')
+
+
 def test_a_steady_graph_is_not_registered_again(bridged):
     """A subscribed-only topic, once imported, stays as it is: no unregister/register over the bridge's
     once-a-second refreshes (its type used to flip to '*' between them)."""
     tb, robot, cloud, procs = bridged
-    cloud.run(['rostopic', 'echo', '/chatter'], 'echo_only')
+    cloud.run(['/usr/bin/python3', '-c', SUBSCRIBER], 'subscriber_only')
     wait_until(lambda: any(n.startswith('/cloud/') for t, nodes in robot.call('getSystemState')[1]
                            if t == '/chatter' for n in nodes), 20, 'the cloud subscriber on the robot master')
     seen = {'count': -1, 'since': time.monotonic()}
