@@ -528,7 +528,7 @@ def test_the_control_plane_priority_is_given_per_thread():
     """The calling thread gets the nice value, once; the process's other threads keep theirs. (A positive
     value, which needs no privilege, stands in for the configured one.)"""
     import threading
-    from migration_manager.core.priority import Elevator, thread_nice
+    from cnr_runtime.priority import Elevator, thread_nice
     warnings = []
     main_nice = thread_nice(threading.get_native_id())
     seen = {}
@@ -549,7 +549,7 @@ def test_the_control_plane_priority_is_given_per_thread():
 
 BOOST_SCRIPT = r"""
 import threading, time, sys
-from migration_manager.core.priority import Elevator, thread_nice
+from cnr_runtime.priority import Elevator, thread_nice
 from cnr_harness import wait_until
 gate, tids = threading.Event(), {}
 def worker(name):

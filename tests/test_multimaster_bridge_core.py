@@ -211,7 +211,8 @@ def test_config_parses_and_rejects_bad_values(tmp_path):
                       (dict(peers=[dict(name='robot', address='h:1')]), 'name'),
                       (dict(secret=None, secret_file=str(tmp_path / 'missing')), 'secret_file'),
                       (dict(loss_timeout=0.1), 'loss_timeout'), (dict(allow_topics=[3]), 'allow_topics'),
-                      (dict(heartbeat_rate=None), 'heartbeat_rate: missing'),
+                      (dict(heartbeat_rate=None), 'heartbeat_rate: missing'), (dict(nice=-21), 'nice'),
+                      (dict(nice=None), 'nice: missing'),
                       (dict(deny_services=None), 'deny_services: missing')):
         with pytest.raises(ConfigError) as err:
             config.parse(section(**kw))

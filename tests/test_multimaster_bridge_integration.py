@@ -271,3 +271,18 @@ def test_a_stopped_bridge_leaves_no_proxy_behind(bridged):
     robot.stop_proc(procs[0])            # SIGINT: its on_shutdown hook removes what it registered
     assert procs[0].returncode == 0, log(procs[0])[-2000:]
     assert not cloud_proxies(), 'the stopped bridge left its proxies registered'
+
+
+def test_every_thread_of_the_bridge_runs_at_its_nice_value(bridged):
+    """config/bridge.yaml ``nice``: the re-registration after an outage does not queue behind the host's bulk work."""
+    import psutil
+    from cnr_params import load_yaml
+    nice = load_yaml(os.path.join(os.path.dirname(os.path.abspath(__file__)), '..', 'config', 'bridge.yaml'))['nice']
+    tb, robot, cloud, procs = bridged
+    wait_until(lambda: 'peer cloud is up' in log(procs[0]), 30, 'the robot bridge to see its peer')
+    nodes = [p for p in psutil.Process(procs[0].pid).children(recursive=True)
+             if any(part.endswith('multimaster_bridge/bridge') or part.endswith('/bridge') for part in p.cmdline())]
+    assert len(nodes) == 1, [p.cmdline() for p in psutil.Process(procs[0].pid).children(recursive=True)]
+    threads = [t.id for t in nodes[0].threads()]
+    assert len(threads) >= 3                      # rospy's, the receiver's and the heartbeat thread at least
+    assert {os.getpriority(os.PRIO_PROCESS, tid) for tid in threads} == {nice}

@@ -123,6 +123,7 @@ class TwoHostMission:
         self.link, self.trace, self.link_map = link, trace, link_map
         settings = Section.from_file(os.path.join(ws_config, 'two_host.yaml')).section('two_host')
         self.relay_drain_timeout = settings.number('relay_drain_timeout', nonnegative=True)
+        self.robot_master_nice = settings.integer('robot_master_nice', minimum=-20, maximum=19)
         monitors = settings.section('network_monitor')
         self.monitor_settings = {side: dict(monitors.section(side).data) for side in ('robot', 'cloud')}
         self.testbed = Testbed(os.path.join(ws_config, 'testbed.yaml'))
@@ -210,7 +211,8 @@ class TwoHostMission:
         self.counters0 = self.testbed.status()
         self.robot = RosSide(self.testbed, 'robot', port=self.port, log_dir=self.log_dir)
         self.cloud = RosSide(self.testbed, 'cloud', port=self.port, log_dir=self.log_dir)
-        self.robot.start_master(use_sim_time=True, prefix=self._robot_cpu())
+        self.robot.start_master(use_sim_time=True,
+                                prefix=[*self._robot_cpu(), 'nice', '-n', str(self.robot_master_nice)])
         self.cloud.start_master(use_sim_time=True)
         for side in (self.robot, self.cloud):
             # one run id per master, set before its launches start (roslaunch reads it from the master and

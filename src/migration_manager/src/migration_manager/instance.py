@@ -50,7 +50,7 @@ from migration_manager.codes import ROLE
 from migration_manager.core import state as state_codec
 from migration_manager.core.config import MigrationConfig, from_section
 from migration_manager.core.lease import INSTANCE_HEADER, Answer, Holder, host_of, instance_id
-from migration_manager.core.priority import Elevator
+from cnr_runtime.priority import Elevator
 
 
 class Hooks:
@@ -172,7 +172,7 @@ class ManagedInstance:
         # on the manager's host a freeze never crosses the link: replicas there only cover a crash or a hang
         self.replicate_period = (self.cfg.replicate_period_authority if self.host == self.cfg.authority
                                  else self.cfg.replicate_period)
-        self.elevator = Elevator(self.cfg.control_nice, rospy.logwarn)   # the protocol's threads (core.priority)
+        self.elevator = Elevator(self.cfg.control_nice, rospy.logwarn)   # the protocol's threads (cnr_runtime.priority)
         self.replicator = state_codec.Replicator(module, self.cfg.replicate_keyframe_every)
         self.replica = state_codec.Replica(module)     # the active instance's newest replicas (as a standby)
         self.replica_lock = threading.Lock()

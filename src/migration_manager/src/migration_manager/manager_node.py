@@ -22,7 +22,7 @@ from cnr_runtime import call_with_timeout, init_node, quiet_at_shutdown
 from migration_manager.codes import EVENT_MODE, MODE_WORD, OUTCOME, STEP, TARGET_WORD, health_word
 from migration_manager.core import state as state_codec
 from migration_manager.core.config import from_section
-from migration_manager.core.priority import Elevator
+from cnr_runtime.priority import Elevator
 from migration_manager.core.lease import Answer, Grantor, host_of, instance_id
 from migration_manager.core.plan import Migration, Step
 from migration_manager.instance import lease_topics, topic

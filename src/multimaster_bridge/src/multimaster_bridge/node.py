@@ -20,6 +20,7 @@ from cnr_msgs.msg import LinkQuality
 from cnr_params import exit_on_config_error
 from cnr_params.ros import private_section
 from cnr_runtime import init_node
+from cnr_runtime.priority import Elevator
 from std_srvs.srv import Empty, EmptyResponse
 from multimaster_bridge.core import config as bridge_config
 from multimaster_bridge.core import protocol, sync
@@ -590,6 +591,9 @@ class Bridge:
 def main() -> None:
     init_node('bridge')
     cfg = bridge_config.parse(private_section('~'))
+    # every thread at the control plane's priority (those started later inherit it): re-registering a peer
+    # after an outage is one batch of master calls that otherwise queues behind the host's bulk work
+    Elevator(cfg.nice, rospy.logwarn).whole_process()
     try:
         bridge = Bridge(cfg, rosgraph.get_master_uri(), rospy.get_name())
     except OSError as exc:

@@ -103,10 +103,19 @@ def check(a: Tuple[str, MasterReader, Filters], b: Tuple[str, MasterReader, Filt
     registration (:func:`multimaster_bridge.core.invariant.discrepancies`); the URIs are looked up only once the
     registrations match, and only those not in ``known`` (bridge name -> node -> URI, filled here: a caller that
     keeps it between checks clears it now and then)."""
+    return check_at(a, b, known)[1]
+
+
+def check_at(a: Tuple[str, MasterReader, Filters], b: Tuple[str, MasterReader, Filters],
+             known: Optional[Dict[str, Dict[str, str]]] = None) -> Tuple[float, List[str]]:
+    """:func:`check`, with the time (``time.monotonic()``) by which both masters had answered with their
+    registrations: what they showed held by then. The URI lookups that follow when the registrations match take
+    more round trips to a master (a CPU-capped one answers slowly); the time is not theirs."""
     sides = [Side(name, MasterView.from_system_state(reader.system_state()), filters) for name, reader, filters in (a, b)]
+    read_at = time.monotonic()
     wrong = discrepancies(*sides)
     if wrong:
-        return wrong
+        return read_at, wrong
     known = {} if known is None else known
     readers = {a[0]: a[1], b[0]: b[1]}
     for here, there in ((sides[0], sides[1]), (sides[1], sides[0])):
@@ -116,7 +125,7 @@ def check(a: Tuple[str, MasterReader, Filters], b: Tuple[str, MasterReader, Filt
             cache = known.setdefault(side.name, {})
             cache.update(readers[side.name].node_uris(sorted(n for n in names if n not in cache)))
             side.view.uris.update({n: cache[n] for n in names if n in cache})
-    return discrepancies(*sides)
+    return read_at, discrepancies(*sides)
 
 
 @dataclass
@@ -176,23 +185,23 @@ class RestoreWatch:
         self._known: Dict[str, Dict[str, str]] = {}
         self._known_at = -float('inf')
         self._lock = threading.Lock()
-        self._samples: List[Tuple[float, List[str]]] = []     # (time after the poll, violations)
+        self._samples: List[Tuple[float, List[str]]] = []     # (check_at's time, violations)
         self._began: List[float] = []
         self._ended: List[float] = []
         self._stop = threading.Event()
         self._thread: Optional[threading.Thread] = None
         self.errors = 0
 
-    def check_now(self) -> List[str]:
-        """One check of the invariant (what is wrong; empty: it holds). A master that does not answer is a
-        violation."""
+    def check_now(self) -> Tuple[float, List[str]]:
+        """One check of the invariant: (its time, :func:`check_at`; what is wrong, empty when it holds). A master
+        that does not answer is a violation, at the time the check gave up."""
         if time.monotonic() - self._known_at > self.uri_refresh:
             self._known, self._known_at = {}, time.monotonic()
         try:
-            return check(*self.sides, known=self._known)
+            return check_at(*self.sides, known=self._known)
         except (OSError, RuntimeError, xmlrpc.client.Error) as exc:
             self.errors += 1
-            return [f'a master did not answer: {exc}']
+            return time.monotonic(), [f'a master did not answer: {exc}']
 
     def start(self) -> 'RestoreWatch':
         self._thread = threading.Thread(target=self._run, name='restore-watch', daemon=True)
@@ -208,9 +217,9 @@ class RestoreWatch:
     def _run(self) -> None:
         while not self._stop.is_set():
             started = time.monotonic()
-            wrong = self.check_now()
+            sample = self.check_now()
             with self._lock:
-                self._samples.append((time.monotonic(), wrong))
+                self._samples.append(sample)
             self._stop.wait(max(0.0, started + self.interval - time.monotonic()))
 
     def outage_began(self, t: Optional[float] = None) -> None:
@@ -254,8 +263,8 @@ class RestoreWatch:
 def restore_times(samples: List[Tuple[float, List[str]]], began: List[float], ended: List[float]) -> RestoreResults:
     """Per link return in ``ended``: the two measures of :mod:`multimaster_bridge.core.restore` within its window,
     which lasts until the next outage in ``began`` (or the last sample). ``samples``: (time, discrepancies) of every
-    poll, in time order. A poll's time is when it ended, so neither measure is below the first poll after the
-    return (the watch's resolution)."""
+    poll, in time order. A poll's time is when both masters had answered (:func:`check_at`), so neither measure is
+    below the first poll after the return (the watch's resolution)."""
     out = RestoreResults()
     for t in ended:
         window_end = min((b for b in began if b >= t), default=math.inf)
@@ -270,7 +279,8 @@ def restore_times(samples: List[Tuple[float, List[str]]], began: List[float], en
 
 def _at_poll_resolution(samples: List[Tuple[float, List[str]]], t: float, window_end: float,
                         measure: Optional[float]) -> Optional[float]:
-    """``measure`` of the return at ``t``, never below the first poll after ``t`` (a poll's time is when it ended);
+    """``measure`` of the return at ``t``, never below the first poll after ``t`` (a poll's time is when both masters had
+    answered);
     None without one before ``window_end``."""
     first = next((s[0] for s in samples if t <= s[0] < window_end), None)
     return None if measure is None or first is None else max(measure, first - t)
@@ -279,4 +289,4 @@ def _at_poll_resolution(samples: List[Tuple[float, List[str]]], t: float, window
 changes = restore.changes
 
 
-__all__ = ['MasterReader', 'RestoreResults', 'RestoreWatch', 'bridge_filters', 'changes', 'check', 'restore_times']
+__all__ = ['MasterReader', 'RestoreResults', 'RestoreWatch', 'bridge_filters', 'changes', 'check', 'check_at', 'restore_times']

@@ -52,7 +52,7 @@ class MigrationConfig:
     stop_timeout: float
     restart_delay: float
     log_dir: str
-    control_nice: int            # nice value of the manager and of the instances' protocol threads (core.priority)
+    control_nice: int            # nice value of the manager and of the instances' protocol threads (cnr_runtime.priority)
     promotion_boost: float       # s every thread of a promoted instance runs at control_nice (0: none)
     bridge_poll_service: str     # this host's bridge's "poll now" service, called by an instance that became
                                  # active (its new registrations reach the other host at once); '' = none

@@ -30,6 +30,7 @@ class BridgeConfig:
     loss_timeout: float
     poll_rate: float
     quality_rate: float
+    nice: int                 # the bridge's CPU priority (cnr_runtime.priority)
     extra: dict = field(default_factory=dict)
 
 
@@ -98,7 +99,8 @@ def parse(section: Section) -> BridgeConfig:
         heartbeat_rate=section.number('heartbeat_rate', minimum=1.0, maximum=50.0),
         loss_timeout=section.number('loss_timeout', positive=True),
         poll_rate=section.number('poll_rate', minimum=0.05, maximum=100.0),
-        quality_rate=section.number('quality_rate', positive=True))
+        quality_rate=section.number('quality_rate', positive=True),
+        nice=section.integer('nice', minimum=-20, maximum=19))
     if cfg.loss_timeout < 3.0 / cfg.heartbeat_rate:
         raise section.error('loss_timeout', f'must cover at least 3 heartbeats ({3.0 / cfg.heartbeat_rate:.2f} s)')
     return cfg

@@ -1,11 +1,14 @@
-"""CPU priority of the migration's control plane (ROS-free).
+"""CPU priority of the control plane (ROS-free).
 
 On the robot the modules, the master and the bridge share one small computer that is often saturated (the
-testbed's CPU cap is throttled in most periods during a mission). A hand-over or a lease renewal that queues
-behind bulk work (costmaps, the bridge's polling) stretches the downtime and can make a lease lapse. The
-manager and the threads of a managed instance that carry the protocol (its renewal loop, its lease and control
-callbacks) therefore run at ``control_nice`` (config/migration.yaml): Linux nice values are per thread and a
-new thread inherits its creator's, so the module's own work keeps its priority.
+testbed's CPU cap is throttled in most periods during a mission). Work that keeps the system together queues
+behind bulk work (costmaps, point clouds) there: a hand-over or a lease renewal stretches the downtime and can
+make a lease lapse, and the bridge's re-registration of a peer after an outage (one batch of master calls) leaves
+the graph incomplete for longer. The control plane therefore runs at a nice value of its own:
+migration_manager's manager and the threads of a managed instance that carry the protocol (its renewal loop, its
+lease and control callbacks) at ``control_nice`` (config/migration.yaml), the multimaster bridge at its ``nice``
+(config/bridge.yaml). Linux nice values are per thread and a new thread inherits its creator's, so a module's
+own work keeps its priority.
 
 A promoted instance's own threads carry the hand-over's critical path too (its state restored, its action
 server started, its first control cycle, its publishers' writer threads), so :meth:`Elevator.boost` gives every
