@@ -35,6 +35,7 @@ from dataclasses import dataclass
 from typing import Dict, List, Optional, Sequence, Tuple
 
 from sklearn.neighbors import KNeighborsClassifier
+from threadpoolctl import threadpool_limits
 
 from network_monitor.core.evaluation import OFFLOAD, ONLOAD, other
 from network_monitor.core.training import Row
@@ -147,8 +148,12 @@ class Decider:
         if self._knn is None:
             d = self.settings.cold_start.decide(c_l, r_bw)
             return Decision(d, COLD_START, d, {}, (), point, 1.0)
-        decision = str(self._knn.predict([point])[0])
-        distances, indices = self._knn.kneighbors([point])
+        # one thread: scikit-learn's brute-force neighbour search runs an OpenMP team whose threads spin-wait, and
+        # on the robot's computer (a CPU quota, throttled most of the time during a task) one call of a few
+        # microseconds' work then costs ~40 ms of CPU; the robot re-decides on every network profile (2 Hz)
+        with threadpool_limits(limits=1, user_api='openmp'):
+            decision = str(self._knn.predict([point])[0])
+            distances, indices = self._knn.kneighbors([point])
         neighbours = tuple(Neighbour(index=int(i), c_l=self.rows[i].c_l, r_bw=self.rows[i].r_bw,
                                      point=self.points[i], label=self.rows[i].label, distance=float(dist))
                            for dist, i in zip(distances[0], indices[0]))
