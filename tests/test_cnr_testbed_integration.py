@@ -56,6 +56,17 @@ def test_delay_live_change_and_outage(testbed, workspace):
     assert r.returncode != 0
 
 
+def test_each_host_has_the_configured_network_settings(testbed, workspace):
+    from cnr_params import load_yaml
+    settings = load_yaml(f'{workspace}/config/testbed.yaml')['testbed']['sysctl']
+    assert settings
+    for side in ('robot', 'cloud'):
+        for key, value in settings.items():
+            r = subprocess.run(['ip', 'netns', 'exec', f'{NAME}-{side}', 'sysctl', '-n', key], capture_output=True,
+                               text=True, timeout=30)
+            assert r.stdout.strip() == str(value), (side, key, r.stdout, r.stderr)
+
+
 def test_down_leaves_nothing_and_sigkill_is_cleaned_up(workspace):
     assert script(workspace, 'up').returncode == 0
     sup = int(open(f'/run/cnr_testbed/{NAME}.pid').read())

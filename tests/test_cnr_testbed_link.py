@@ -120,6 +120,9 @@ def write(tmp_path, name, text):
     (lambda t: t.pop('mtu'), 'testbed.mtu: missing'),
     (lambda t: t['robot'].pop('device'), 'testbed.robot.device: missing'),
     (lambda t: t['link']['both'].pop('queue'), 'testbed.link.both.queue: missing'),
+    (lambda t: t.pop('sysctl'), 'testbed.sysctl: missing'),
+    (lambda t: t['sysctl'].update({'kernel.panic': 1}), 'testbed.sysctl.kernel.panic'),
+    (lambda t: t['sysctl'].update({'net.ipv4.tcp_thin_linear_timeouts': 'yes'}), 'tcp_thin_linear_timeouts'),
 ])
 def test_bad_testbed_config(tmp_path, change, field):
     doc = copy.deepcopy(load_yaml(TESTBED_YAML))

@@ -115,6 +115,8 @@ class Testbed:
             for ns in (self.cfg.robot_ns, self.cfg.cloud_ns):
                 netns.add_namespace(ns)
                 created.append(ns)
+                for key, value in self.cfg.sysctl.items():
+                    netns.set_sysctl(ns, key, value)
             args = [sys.executable, '-m', 'cnr_testbed.emulator', self.config_path]
             for k, v in self.overrides.items():
                 args += ['--set', f'{k}={v}']

@@ -44,6 +44,18 @@ def add_namespace(name: str) -> None:
     ip('-n', name, 'link', 'set', 'lo', 'up')
 
 
+def set_sysctl(namespace: str, key: str, value: int) -> None:
+    """Write the network setting ``key`` (e.g. ``net.ipv4.tcp_thin_linear_timeouts``) of ``namespace``'s kernel
+    stack: /proc/sys/net opened from inside the namespace is its own."""
+    path = os.path.join('/proc/sys', *key.split('.'))
+    with inside(namespace):
+        try:
+            with open(path, 'w') as f:
+                f.write(str(value))
+        except OSError as exc:
+            raise RuntimeError(f'sysctl {key} = {value} in the namespace {namespace}: {exc.strerror}') from None
+
+
 def delete_namespace(name: str) -> None:
     if name in namespaces():
         ip('netns', 'delete', name, check=False)

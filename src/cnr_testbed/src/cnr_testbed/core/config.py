@@ -54,6 +54,21 @@ class TestbedConfig:
     up: Conditions            # robot -> cloud
     down: Conditions          # cloud -> robot
     robot_cpu: RobotCpuConfig
+    sysctl: Dict[str, int]    # per-namespace kernel settings (net.*) written in both namespaces at start
+
+
+SYSCTL_RE = re.compile(r'^net(\.[a-z0-9_]+)+$')
+
+
+def sysctl_from(sec: Section) -> Dict[str, int]:
+    """``testbed.sysctl``: network settings of the hosts' kernels (``net.*``, each namespace has its own), integers."""
+    out = {}
+    for key in sec.keys():
+        if not SYSCTL_RE.match(key):
+            raise sec.error(key, 'not a per-namespace network setting (net.<group>.<name>, e.g. '
+                                 'net.ipv4.tcp_thin_linear_timeouts)')
+        out[key] = sec.integer(key)
+    return out
 
 
 def _name(sec: Section, key: str) -> str:
@@ -112,7 +127,8 @@ def load_testbed(path: str, overrides: Optional[Dict[str, str]] = None) -> Testb
                         robot_dev=_name(robot, 'device'), cloud_dev=_name(cloud, 'device'),
                         up=conditions_from(link.section('up', {}), both),
                         down=conditions_from(link.section('down', {}), both),
-                        robot_cpu=robot_cpu_from(t.section('robot_cpu')))
+                        robot_cpu=robot_cpu_from(t.section('robot_cpu')),
+                        sysctl=sysctl_from(t.section('sysctl')))
     if cfg.robot_ns == cfg.cloud_ns:
         raise cloud.error('namespace', 'must differ from the robot namespace')
     return cfg
