@@ -281,7 +281,7 @@ def test_every_thread_of_the_bridge_runs_at_its_nice_value(bridged):
     tb, robot, cloud, procs = bridged
     wait_until(lambda: 'peer cloud is up' in log(procs[0]), 30, 'the robot bridge to see its peer')
     nodes = [p for p in psutil.Process(procs[0].pid).children(recursive=True)
-             if any(part.endswith('multimaster_bridge/bridge') or part.endswith('/bridge') for part in p.cmdline())]
+             if any(part.endswith('/bridge') for part in p.cmdline())]
     assert len(nodes) == 1, [p.cmdline() for p in psutil.Process(procs[0].pid).children(recursive=True)]
     threads = [t.id for t in nodes[0].threads()]
     assert len(threads) >= 3                      # rospy's, the receiver's and the heartbeat thread at least

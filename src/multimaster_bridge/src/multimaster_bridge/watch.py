@@ -97,21 +97,16 @@ class MasterReader:
         return {n: uri for n, (code, _, uri) in zip(nodes, answers) if code == 1}
 
 
-def check(a: Tuple[str, MasterReader, Filters], b: Tuple[str, MasterReader, Filters],
-          known: Optional[Dict[str, Dict[str, str]]] = None) -> List[str]:
-    """The invariant's discrepancies between two live masters (``(bridge name, reader, filters)`` each), one per
-    registration (:func:`multimaster_bridge.core.invariant.discrepancies`); the URIs are looked up only once the
-    registrations match, and only those not in ``known`` (bridge name -> node -> URI, filled here: a caller that
-    keeps it between checks clears it now and then)."""
-    return check_at(a, b, known)[1]
-
-
 def check_at(a: Tuple[str, MasterReader, Filters], b: Tuple[str, MasterReader, Filters],
              known: Optional[Dict[str, Dict[str, str]]] = None) -> Tuple[float, List[str]]:
-    """:func:`check`, with the time (``time.monotonic()``) by which both masters had answered with their
-    registrations: what they showed held by then. The URI lookups that follow when the registrations match take
-    more round trips to a master (a CPU-capped one answers slowly); the time is not theirs."""
-    sides = [Side(name, MasterView.from_system_state(reader.system_state()), filters) for name, reader, filters in (a, b)]
+    """The invariant's discrepancies between two live masters (``(bridge name, reader, filters)`` each), one per
+    registration (:func:`multimaster_bridge.core.invariant.discrepancies`), and the time (``time.monotonic()``) by
+    which both masters had answered with their registrations: what they showed held by then. The URIs are looked up
+    only once the registrations match, and only those not in ``known`` (bridge name -> node -> URI, filled here: a
+    caller that keeps it between checks clears it now and then); those lookups take more round trips to a master (a
+    CPU-capped one answers slowly), and the time is not theirs."""
+    sides = [Side(name, MasterView.from_system_state(reader.system_state()), filters)
+             for name, reader, filters in (a, b)]
     read_at = time.monotonic()
     wrong = discrepancies(*sides)
     if wrong:
@@ -279,9 +274,8 @@ def restore_times(samples: List[Tuple[float, List[str]]], began: List[float], en
 
 def _at_poll_resolution(samples: List[Tuple[float, List[str]]], t: float, window_end: float,
                         measure: Optional[float]) -> Optional[float]:
-    """``measure`` of the return at ``t``, never below the first poll after ``t`` (a poll's time is when both masters had
-    answered);
-    None without one before ``window_end``."""
+    """``measure`` of the return at ``t``, never below the first poll after ``t`` (a poll's time is when both masters
+    had answered); None without one before ``window_end``."""
     first = next((s[0] for s in samples if t <= s[0] < window_end), None)
     return None if measure is None or first is None else max(measure, first - t)
 
@@ -289,4 +283,5 @@ def _at_poll_resolution(samples: List[Tuple[float, List[str]]], t: float, window
 changes = restore.changes
 
 
-__all__ = ['MasterReader', 'RestoreResults', 'RestoreWatch', 'bridge_filters', 'changes', 'check', 'check_at', 'restore_times']
+__all__ = ['MasterReader', 'RestoreResults', 'RestoreWatch', 'bridge_filters', 'changes', 'check_at',
+           'restore_times']
