@@ -58,7 +58,10 @@ def test_delay_live_change_and_outage(testbed, workspace):
 
 def test_each_host_has_the_configured_network_settings(testbed, workspace):
     from cnr_params import load_yaml
-    settings = load_yaml(f'{workspace}/config/testbed.yaml')['testbed']['sysctl']
+    from cnr_testbed.netns import has_sysctl
+    testbed_cfg = load_yaml(f'{workspace}/config/testbed.yaml')['testbed']
+    settings = dict(testbed_cfg['sysctl'])
+    settings.update({k: v for k, v in testbed_cfg['sysctl_if_available'].items() if has_sysctl(k)})
     assert settings
     for side in ('robot', 'cloud'):
         for key, value in settings.items():

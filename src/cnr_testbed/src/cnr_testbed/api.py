@@ -117,6 +117,11 @@ class Testbed:
                 created.append(ns)
                 for key, value in self.cfg.sysctl.items():
                     netns.set_sysctl(ns, key, value)
+                for key, value in self.cfg.sysctl_if_available.items():
+                    if netns.has_sysctl(key):
+                        netns.set_sysctl(ns, key, value)
+                    elif ns == self.cfg.robot_ns:
+                        print(f'testbed: this kernel has no {key}: left at its default', file=sys.stderr)
             args = [sys.executable, '-m', 'cnr_testbed.emulator', self.config_path]
             for k, v in self.overrides.items():
                 args += ['--set', f'{k}={v}']

@@ -44,6 +44,11 @@ def add_namespace(name: str) -> None:
     ip('-n', name, 'link', 'set', 'lo', 'up')
 
 
+def has_sysctl(key: str) -> bool:
+    """Whether this kernel has the setting ``key`` (e.g. ``net.ipv4.tcp_rto_max_ms``: Linux 6.15 and later)."""
+    return os.path.exists(os.path.join('/proc/sys', *key.split('.')))
+
+
 def set_sysctl(namespace: str, key: str, value: int) -> None:
     """Write the network setting ``key`` (e.g. ``net.ipv4.tcp_thin_linear_timeouts``) of ``namespace``'s kernel
     stack: /proc/sys/net opened from inside the namespace is its own."""

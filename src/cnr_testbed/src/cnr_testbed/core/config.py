@@ -55,13 +55,15 @@ class TestbedConfig:
     down: Conditions          # cloud -> robot
     robot_cpu: RobotCpuConfig
     sysctl: Dict[str, int]    # per-namespace kernel settings (net.*) written in both namespaces at start
+    sysctl_if_available: Dict[str, int]   # the same, skipped (with a note) where the kernel lacks the setting
 
 
 SYSCTL_RE = re.compile(r'^net(\.[a-z0-9_]+)+$')
 
 
 def sysctl_from(sec: Section) -> Dict[str, int]:
-    """``testbed.sysctl``: network settings of the hosts' kernels (``net.*``, each namespace has its own), integers."""
+    """``testbed.sysctl`` or ``testbed.sysctl_if_available``: network settings of the hosts' kernels (``net.*``,
+    each namespace has its own), integers."""
     out = {}
     for key in sec.keys():
         if not SYSCTL_RE.match(key):
@@ -128,7 +130,8 @@ def load_testbed(path: str, overrides: Optional[Dict[str, str]] = None) -> Testb
                         up=conditions_from(link.section('up', {}), both),
                         down=conditions_from(link.section('down', {}), both),
                         robot_cpu=robot_cpu_from(t.section('robot_cpu')),
-                        sysctl=sysctl_from(t.section('sysctl')))
+                        sysctl=sysctl_from(t.section('sysctl')),
+                        sysctl_if_available=sysctl_from(t.section('sysctl_if_available')))
     if cfg.robot_ns == cfg.cloud_ns:
         raise cloud.error('namespace', 'must differ from the robot namespace')
     return cfg
