@@ -21,7 +21,7 @@ import time
 import pytest
 import yaml
 
-from cnr_harness import wait_until
+from cnr_harness import WaitTimeout, wait_until
 
 pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason='needs root (network namespaces, TUN devices)')
 
@@ -115,6 +115,18 @@ class Bed:
     def rows(self):
         with open(self.probe_file) as f:
             return list(csv.DictReader(f, delimiter='\t'))
+
+    def diagnosis(self) -> str:
+        """What a failed wait for answers shows: the probe's last calls, the robot master's provider of next_goal,
+        the bridge's and the manager's last lines."""
+        calls = [f"{r['time']} ok={r['ok']} {r['instance']}" for r in self.rows() if r['topic'] == 'next_goal'][-8:]
+        info = self.rosrun('robot', 'rosservice', 'info', '/global_goal_manager/next_goal', timeout=15)
+        tails = []
+        for name in ('bridge_robot', 'manager', 'agent_robot'):
+            for path in sorted(self.logs.glob(f'{name}-*.log')):
+                lines = [l for l in path.read_text(errors='replace').splitlines() if l.startswith('[')]
+                tails.append(f'--- {path.name}\n' + '\n'.join(l[:200] for l in lines[-8:]))
+        return '\n'.join(['probe calls:', *calls, 'robot master:', info.stdout + info.stderr, *tails])
 
     def answers(self, since):
         return [float(r['time']) for r in self.rows() if r['topic'] == 'next_goal' and r['ok'] == '1'
@@ -300,7 +312,10 @@ def test_the_robot_s_active_instance_killed_is_replaced_by_its_restart(bed):
     os.kill(pid, signal.SIGKILL)
     wait_until(lambda: bed.placement()[MODULE][1] > term and bed.placement()[MODULE][0] == 'robot', 90,
                'a new term on the robot')
-    wait_until(lambda: bed.answers(t_kill + 0.5), 30, 'answers from the restarted instance')
+    try:
+        wait_until(lambda: bed.answers(t_kill + 0.5), 30, 'answers from the restarted instance')
+    except WaitTimeout as exc:
+        raise AssertionError(f'{exc}\n{bed.diagnosis()}') from None
     print(f'answers again {bed.answers(t_kill + 0.5)[0] - t_kill:.1f} s after the kill')
     assert (bed.status('robot') or {}).get('role') == 'active'
     assert (bed.status('cloud') or {}).get('role') != 'active'
@@ -324,7 +339,7 @@ def test_a_target_that_crashes_at_start_is_rolled_back(bed):
         bed.scenario.write_text(good)
     assert bed.placement()[MODULE][0] == 'robot'
     gap = largest_gap(bed.answers(t0))
-    assert gap < 1.0, gap                            # the robot's instance answered throughout
+    assert gap < 1.0, f'{gap}\n{bed.diagnosis()}'                           # the robot's instance answered throughout
 
 
 def test_a_migration_ordered_while_the_link_is_down_does_not_strand_the_module(bed):
@@ -346,7 +361,7 @@ def test_a_migration_ordered_while_the_link_is_down_does_not_strand_the_module(b
         assert p[0] == 'robot' and not p[2], p
         assert (bed.status('robot') or {}).get('role') == 'active'
         gap = largest_gap(bed.answers(t0))
-        assert gap < 1.0, gap                        # the robot's instance answered throughout
+        assert gap < 1.0, f'{gap}\n{bed.diagnosis()}'                       # the robot's instance answered throughout
     finally:
         bed.tb.set('both', outage=False)
     # the cloud instance a start request may have left behind never became active

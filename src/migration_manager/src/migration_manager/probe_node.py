@@ -5,7 +5,8 @@ published it (the ``cnr_instance`` connection header; '-' for an unmanaged publi
 ``/global_goal_manager/next_goal`` at a fixed rate over a persistent connection that, after a failed or refused
 request, waits for the name to move to another provider (:class:`migration_manager.client.MovableServiceProxy`;
 the global goal manager has no periodic output of its own), recording each answer at the time its request went
-out (a request sent then was served), and move_base's goal results (``/move_base/result``: ok = succeeded, the
+out (a request sent then was served; a call that failed holds why in the instance column), and move_base's goal
+results (``/move_base/result``: ok = succeeded, the
 final status code in the instance column). For the modules in ``~status_modules`` it also records when each instance closed its outputs for good (topic ``frozen``: the
 frozen status's stamp, the instance's own clock — on the testbed one clock for every host), when one became
 active (topic ``active``: a promotion, or a renewal granted again after a lapse) and when an active one's lease
@@ -110,10 +111,16 @@ class Probe:
         period = 1.0 / self.rate
         next_call = time.monotonic()
         while not rospy.core.is_shutdown_requested():
-            ok, _answer, sent = self.next_goal.call(1.0, 0.0, 0.0)
-            self._write('next_goal', '', ok, sent)
+            ok, answer, sent = self.next_goal.call(1.0, 0.0, 0.0)
+            self._write('next_goal', '' if ok else why_failed(answer), ok, sent)
             next_call = max(next_call + period, time.monotonic())
             time.sleep(max(0.0, next_call - time.monotonic()))
+
+
+def why_failed(result) -> str:
+    """A failed call's refusal or exception in one short TSV-safe field (for a post-mortem of the probe's file)."""
+    text = getattr(result, 'message', '') or f'{type(result).__name__}: {result}'
+    return ' '.join(str(text).split())[:120]
 
 
 @cnr_params.exit_on_config_error
