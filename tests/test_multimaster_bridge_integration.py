@@ -286,3 +286,49 @@ def test_every_thread_of_the_bridge_runs_at_its_nice_value(bridged):
     threads = [t.id for t in nodes[0].threads()]
     assert len(threads) >= 3                      # rospy's, the receiver's and the heartbeat thread at least
     assert {os.getpriority(os.PRIO_PROCESS, tid) for tid in threads} == {nice}
+
+
+# a subscriber that writes a file at its first message
+FIRST_MESSAGE = ('import sys, rospy\n'
+                 'from std_msgs.msg import String\n'
+                 'rospy.init_node("first_message")\n'
+                 'def got(msg):\n'
+                 '    open(sys.argv[1], "w").write(msg.data)\n'
+                 'rospy.Subscriber("/local_chatter", String, got)\n'
+                 'rospy.spin()\n')
+
+
+def test_the_master_connects_local_nodes_while_its_calls_to_cloud_nodes_hang(hosts, tmp_path):
+    """The robot never waits on the cloud, its master included. A master tells each subscriber of a topic about a
+    new publisher (publisherUpdate) from a pool of threads; the cloud's subscribers, registered by the bridge with
+    their own addresses, are called across the link, and with the link down each such call hangs until TCP gives
+    up. With rosmaster's stock 3 threads a few of them stall every notification behind them, local ones too: a
+    robot node then never hears of a new local publisher (and a restarted module instance is not heard by the
+    migration manager) until the link has been back for a while."""
+    from xmlrpc.client import ServerProxy
+    from cnr_testbed import netns
+    tb, robot, _cloud, _ = hosts
+    hung = [(f'/cloud/hung_{i}', f'http://{tb.cloud_address}:{41000 + i}/') for i in range(8)]
+    tb.set('both', outage=True)
+    try:
+        with netns.inside(robot.namespace):
+            master = ServerProxy(robot.master_uri)
+            for caller, api in hung:        # as the bridge registers the cloud's subscribers
+                master.registerSubscriber(caller, '/hung', 'std_msgs/String', api)
+            master.registerPublisher('/robot_hung_pub', '/hung', 'std_msgs/String', f'http://{tb.robot_address}:1/')
+        mark = tmp_path / 'first_message'
+        robot.run(['/usr/bin/python3', '-c', FIRST_MESSAGE, str(mark)], 'first_message')
+        wait_until(lambda: any(t == '/local_chatter' for t, _ in robot.call('getSystemState')[1]), 20,
+                   'the local subscriber to register')
+        robot.run(['rostopic', 'pub', '-r', '10', '/local_chatter', 'std_msgs/String', 'data: here'], 'local_pub')
+        wait_until(mark.exists, 5.0, 'the local subscriber to hear the local publisher while the link is down')
+    finally:
+        tb.set('both', outage=False)
+        with netns.inside(robot.namespace):
+            master = ServerProxy(robot.master_uri)
+            for caller, api in hung:
+                master.unregisterSubscriber(caller, '/hung', api)
+            master.unregisterPublisher('/robot_hung_pub', '/hung', f'http://{tb.robot_address}:1/')
+        for proc in list(robot.procs):
+            if proc is not robot.master:
+                robot.stop_proc(proc)

@@ -131,13 +131,14 @@ class Processes:
         self.popens.append(popen)
         return popen
 
-    def ensure_master(self, prog: str, port: int) -> None:
-        """Start ``roscore -p PORT`` unless a master answers at ``ROS_MASTER_URI``; wait until it answers."""
+    def ensure_master(self, prog: str, port: int, workers: Optional[int] = None) -> None:
+        """Start ``roscore -p PORT`` (``-w WORKERS``: the master's notification threads, when given) unless a master
+        answers at ``ROS_MASTER_URI``; wait until it answers."""
         if master_up():
             log(prog, f'using the running master at {os.environ["ROS_MASTER_URI"]}')
             return
         log(prog, f'starting roscore on port {port}')
-        roscore = self.start(['roscore', '-p', str(port)])
+        roscore = self.start(['roscore', '-p', str(port), *(['-w', str(workers)] if workers else [])])
 
         def answers() -> bool:
             if roscore.poll() is not None:

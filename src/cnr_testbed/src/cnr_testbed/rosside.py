@@ -66,8 +66,10 @@ class RosSide:
 
     def start_master(self, use_sim_time: bool = False, timeout: float = 20.0,
                      prefix: Sequence[str] = ()) -> None:
-        """The side's rosmaster; ``prefix`` wraps the command (e.g. :func:`cnr_testbed.cpucap.run_argv`'s)."""
-        self.master = self.run([*prefix, 'rosmaster', '--core', '-p', str(self.port)], 'rosmaster')
+        """The side's rosmaster with the testbed's ``master_workers`` notification threads; ``prefix`` wraps the
+        command (e.g. :func:`cnr_testbed.cpucap.run_argv`'s)."""
+        self.master = self.run([*prefix, 'rosmaster', '--core', '-p', str(self.port),
+                                '-w', str(self.testbed.cfg.master_workers)], 'rosmaster')
         wait_until(self.master_up, timeout, f'the rosmaster of {self.side}', self.master)
         self.call('setParam', '/use_sim_time', use_sim_time)
 
