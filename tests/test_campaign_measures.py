@@ -311,3 +311,100 @@ def test_rows_learned_during_the_runs_of_each_task():
                                ('corridor_round_trip', 300), ('patrol', 130))]
     got = learned_during(learned, runs, {('corridor_round_trip', 'c2'), ('patrol', 'c1')}, 'corridor_round_trip')
     assert got == [learned[1], learned[3]]      # c2's row half a second after its end counts; c1's is not a key
+
+
+# ---------------------------------------------------------------- a learning plan
+def test_a_learning_plan_runs_training_conditions_once_and_held_out_ones_repeated_per_placement():
+    conditions = campaign.learning_split(campaign.draw_conditions(4, 7, campaign.Ranges(0, 200, 0.5, 50, 0, 0.05)),
+                                         0.5)
+    assert [c.id for c in conditions] == ['c0001', 'c0002', 'h0003', 'h0004']
+    runs = campaign.learning_plan_document('corridor_long', 'corridor', 6.0, conditions, 2)['runs']
+    assert [(r['id'], r['force'], r['learn'], r['explore'], r['reuse_profile']) for r in runs[:3]] == [
+        ('c0001-policy', '', True, True, False), ('c0002-policy', '', True, True, False),
+        ('h0003-onload-1', ONLOAD, False, False, False)]
+    held = [r for r in runs if r['condition'] == 'h0003']
+    assert [(r['force'], r['reuse_profile']) for r in held] == [(ONLOAD, False), (OFFLOAD, True), (ONLOAD, True),
+                                                                (OFFLOAD, True)]
+    assert len(runs) == 2 + 2 * 4 and all(r['link'] == held[0]['link'] for r in held)
+    with pytest.raises(ValueError):
+        campaign.learning_plan_document('corridor_long', 'corridor', 6.0, conditions, 0)
+
+
+def test_the_task_runner_reads_a_learning_plan(tmp_path):
+    import yaml
+    from cnr_mission.core.task import load_plan
+    conditions = campaign.learning_split(campaign.draw_conditions(3, 7, campaign.Ranges(0, 200, 0.5, 50, 0, 0.05)),
+                                         1 / 3)
+    path = tmp_path / 'plan.yaml'
+    path.write_text(yaml.safe_dump(campaign.learning_plan_document('corridor_long', 'corridor', 6.0, conditions, 2)))
+    plan = load_plan(str(path))
+    assert [(r.force, r.learn, r.explore) for r in plan.runs[:2]] == [('', True, True), ('', True, True)]
+    assert len(plan.runs) == 6 and plan.runs[-1].reuse_profile and not plan.runs[2].reuse_profile
+
+
+def test_a_learning_plan_holds_out_its_held_out_conditions_and_trains_on_every_other():
+    """Training conditions ran once (no trial); the held-out ones are the held-out trials whatever the fraction,
+    and the training conditions are counted from the rows."""
+    rows = [_row('c0001', OFFLOAD, COMPLETED, 0.9), _row('c0002', ONLOAD, COMPLETED, 1.0),
+            _row('c0003', ONLOAD, COMPLETED, 1.0), _row('c0003', OFFLOAD, COMPLETED, 1.2)]
+    for cid in ('h0004', 'h0005'):
+        rows += [_row(cid, ONLOAD, COMPLETED, 1.0), _row(cid, OFFLOAD, COMPLETED, 0.8)] * 2
+    ts = dm.trials(rows, 'latency_task')
+    train, held = dm.split(ts, 0.9)
+    assert [t.condition for t in train] == ['c0003'] and [t.condition for t in held] == ['h0004', 'h0005']
+    assert len(held[0].offload) == 2
+    keys = dm.training_keys(rows, ts, 0.9, 'latency_task')
+    assert keys == [('latency_task', 'c0001'), ('latency_task', 'c0002'), ('latency_task', 'c0003')]
+    m = dm.measures(ts, {'latency_task': CONTROL}, [], SETTINGS, 0.9, FIGURES, trained_on=keys)
+    assert m.summary['training_conditions'] == 3 and m.summary['per_task']['latency_task']['held_out'] == 2
+    # a paired campaign (no held-out ids) splits by the fraction, as before
+    paired = [r for r in rows if not campaign.held_out(r['condition'])]
+    assert dm.training_keys(paired, dm.trials(paired, 'latency_task'), 0.0, 'latency_task') == \
+        [('latency_task', 'c0003')]
+
+
+def test_the_analysis_of_a_learning_plan(tmp_path, monkeypatch):
+    """10 training conditions run once each (the robot's choice, learned) and 4 held-out ones run twice per
+    placement: the held-out ones are the measured trials, the robot's 10 rows its k-NN's."""
+    import matplotlib.pyplot as plt
+    from cnr_benchmarks import campaign as script
+    from cnr_benchmarks import campaign_figures
+    monkeypatch.setattr(campaign_figures, 'fig_decision_map', lambda a: plt.subplots()[0])
+    from cnr_mission.core.task import RESULT_COLUMNS
+    control = ControlValues('corridor_round_trip', 30.0, 0.3, 0.003, 0.00003, 20, '2026-11-28', 'test')
+    values = str(tmp_path / 'control_values.yaml')
+    write_control_values(values, control)
+    out = tmp_path / 'campaign'
+    out.mkdir()
+    rows, learned, t0 = [], [], 1.8e9
+
+    def add(cid, i, placement, learn, start):
+        c_l, r_bw = (0.02, 50.0) if i % 2 else (0.15, 3.0)
+        v = 1.0 if placement == ONLOAD else (0.8 if i % 2 else 1.5)
+        label = OFFLOAD if i % 2 else ONLOAD
+        rows.append(dict(id=f'{cid}-{placement}', condition=cid, rtt_ms=1000 * c_l, rate_mbit=20, loss=0,
+                         force='' if learn else placement, decision=placement, reason='knn' if learn else 'forced',
+                         policy=label, confidence=1, votes_offload=0, c_l=c_l, r_bw=r_bw, profile_method='probe',
+                         placed=1, placing_time=0.2, redecisions=0, placement='', mission_status=COMPLETED,
+                         t_task=30 * v, b_task=0.003 * v, value=v, good=1, label=label, learned=int(learn),
+                         wall_start=start, wall_time=40))
+        if learn:
+            learned.append(_training_row(c_l, r_bw, label, 'corridor_round_trip', start + 30 - 1.7e9))
+    for i in range(10):
+        add(f'c{i:04d}', i, OFFLOAD if i % 2 else ONLOAD, True, t0 + 50 * i)
+    for j, i in enumerate(range(10, 14)):
+        for k, placement in enumerate((ONLOAD, OFFLOAD, ONLOAD, OFFLOAD)):
+            add(f'h{i:04d}', i, placement, False, t0 + 500 + 200 * j + 50 * k)
+    with open(out / 'results.tsv', 'w', newline='') as f:
+        w = csv.DictWriter(f, RESULT_COLUMNS, delimiter='\t', lineterminator='\n')
+        w.writeheader()
+        w.writerows(rows)
+    (out / 'training_set.tsv').write_text(HEADER + '\n' + ''.join(format_row(r) + '\n' for r in learned))
+    assert script.main(['campaign', '--analyse-only', '--out', str(out), '--control-values', values]) == 0
+    summary = json.loads((out / 'campaign_summary.json').read_text())
+    assert summary['training_conditions'] == 10 and summary['per_task']['corridor_round_trip']['held_out'] == 4
+    assert summary['per_task']['corridor_round_trip']['knn_rows'] == 10
+    assert summary['knn_noise_aware_accuracy_40'] == 1.0 and summary['offload_better_share'] == pytest.approx(0.5)
+    page = (out / 'README.md').read_text()
+    assert '10 training conditions run once each in the placement the robot chose, 4 held-out' in page
+    assert 'Without a pair' not in page

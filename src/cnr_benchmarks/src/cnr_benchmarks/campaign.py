@@ -83,7 +83,7 @@ all-local runs of a results TSV, e.g. the onload runs of exp_local_remote.sh
 CAMPAIGN_DOC = """The continuous experiment of thesis §5.
 
     launch_scripts/exp_campaign.sh [--conditions 100] [--seed 1] [--out DIR] [--test-fraction 0.3]
-                                   [--rtt-min 0 --rtt-max 200 --rate-min 0.5 --rate-max 50 --loss-min 0
+                                   [--held-out-repeats 2] [--rtt-min 0 --rtt-max 200 --rate-min 0.5 --rate-max 50 --loss-min 0
                                     --loss-max 0.05] [--settle 6] [--port 11411] [--slowdown S]
     launch_scripts/exp_campaign.sh --analyse-only [--out DIR] [--exclude c0017,...]
 
@@ -99,6 +99,9 @@ training set in bench_results/campaign[_slowdown<S>]/ (without it the analysis r
 the control values (exp_control.sh) and root; uses the default testbed. Rows are appended as measured; run it again
 to resume. About 66 s per condition. --slowdown S: the robot's CPU capped at 1/S instead of config/testbed.yaml's,
 with the control values of exp_control.sh --slowdown S.
+--held-out-repeats R: a learning plan instead of pairs: each training condition is run once, in the placement the
+robot's policy chooses (with exploration), and learned, as a robot in service learns; each held-out condition (ids
+h0071, ...) R times per placement, never learned, for the noise-aware oracle's repeats.
 --analyse-only: the analysis and figures of the rows so far (--exclude: conditions left out, named on the page).
 """
 
@@ -252,7 +255,11 @@ def local_remote(args: argparse.Namespace) -> int:
 def campaign(args: argparse.Namespace) -> int:
     ranges = core.Ranges(args.rtt_min, args.rtt_max, args.rate_min, args.rate_max, args.loss_min, args.loss_max)
     conditions = core.draw_conditions(args.conditions, args.seed, ranges)
-    plan = core.plan_document(args.task, args.location, args.settle, conditions)
+    if args.held_out_repeats:
+        plan = core.learning_plan_document(args.task, args.location, args.settle,
+                                           core.learning_split(conditions, args.test_fraction), args.held_out_repeats)
+    else:
+        plan = core.plan_document(args.task, args.location, args.settle, conditions)
     plan['seed'] = args.seed
     rows_path = os.path.join(args.out, 'results.tsv')
     os.makedirs(args.out, exist_ok=True)         # the command that made the rows, for a later --analyse-only
@@ -307,6 +314,10 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
             p.add_argument('--conditions', type=int, default=100)
             p.add_argument('--seed', type=int, default=1)
             p.add_argument('--test-fraction', type=float, default=0.3, help='conditions held out (the last ones)')
+            p.add_argument('--held-out-repeats', type=int, default=0,
+                           help='a learning plan: each training condition run once in the placement the robot '
+                                'chooses (exploring) and learned, each held-out one this many times per placement '
+                                'and never learned (0: every condition paired and learned)')
             p.add_argument('--exclude', default='', help='conditions left out of the analysis (comma-separated '
                                                          'ids, e.g. runs known to be corrupted; the page says so)')
             for k, v in (('rtt-min', 0.0), ('rtt-max', 200.0), ('rate-min', 0.5), ('rate-max', 50.0),

@@ -75,8 +75,9 @@ class Analysis:
     oracle: List[str]                   # strict: every pair has a winner
     oracle_noise: List[str]             # noise-aware: EITHER within the noise
     tolerance: float
-    n_train: int
+    n_train: int                        # training pairs (a learning plan's training conditions are mostly not)
     n_test: int
+    trained_on: int                     # conditions the robot learned from (a learning plan's: every one not held out)
     curve: List[Dict]                   # learning curve of the rows learned during the training conditions
     curve_p: List[Dict]                 # the same with one row per training pair, labelled by its oracle
 
@@ -125,19 +126,27 @@ def load_analysis(args: argparse.Namespace) -> Union[Analysis, int]:
         return 2
     training, tw = read_training(args, args.task)
     pairs = core.pairs(rows, cfg.decision.k)
+    if any(core.held_out(p.condition) for p in pairs):
+        # a learning plan: its held-out conditions are held out; the robot learned from every other condition (run
+        # once each, so mostly not pairs)
+        pairs = [p for p in pairs if not core.held_out(p.condition)] + [p for p in pairs if core.held_out(p.condition)]
+        n_test = sum(core.held_out(p.condition) for p in pairs)
+        trained_on = {(args.task, r['condition']) for r in rows if not core.held_out(r['condition'])}
+    else:
+        n_test = int(round(len(pairs) * args.test_fraction))
+        trained_on = {(args.task, p.condition) for p in pairs[:len(pairs) - n_test]}
+    n_train = len(pairs) - n_test
     oracle = [core.oracle(p, control) for p in pairs]
     tolerance = core.noise_tolerance(control)
     oracle_noise = [core.oracle(p, control, tolerance) for p in pairs]
-    n_test = int(round(len(pairs) * args.test_fraction))
-    n_train = len(pairs) - n_test
     learned = [t for t in training if t.source == 'local']
-    train_rows = dm.learned_during(learned, rows, {(args.task, p.condition) for p in pairs[:n_train]}, args.task)
-    curve = _learning_curve(train_rows, n_train, pairs, oracle, oracle_noise, cfg.decision)
+    train_rows = dm.learned_during(learned, rows, trained_on, args.task)
+    curve = _learning_curve(train_rows, n_train, pairs, oracle, oracle_noise, cfg.decision, len(trained_on))
     # the same with one row per training pair labelled by the pair's (strict) oracle (core.paired_rows)
     paired = core.paired_rows(pairs[:n_train], oracle[:n_train])
-    curve_p = _learning_curve(paired, n_train, pairs, oracle, oracle_noise, cfg.decision)
+    curve_p = _learning_curve(paired, n_train, pairs, oracle, oracle_noise, cfg.decision, n_train)
     return Analysis(args, rows, all_rows, excluded, cfg.decision, control, learned, tw, pairs, oracle, oracle_noise,
-                    tolerance, n_train, n_test, curve, curve_p)
+                    tolerance, n_train, n_test, len(trained_on), curve, curve_p)
 
 
 def read_training(args: argparse.Namespace, task: str) -> Tuple[List[Any], List[str]]:
@@ -152,10 +161,11 @@ def read_training(args: argparse.Namespace, task: str) -> Tuple[List[Any], List[
 
 
 def _learning_curve(train_rows: Sequence, n_train: int, pairs: Sequence, oracle: Sequence[str],
-                    oracle_noise: Sequence[str], decision) -> List[Dict]:
-    """k-NN and the best static threshold on the held-out pairs as the training rows grow, against both oracles."""
-    curve = core.learning_curve(train_rows, n_train, pairs[n_train:], oracle[n_train:], decision)
-    curve_noise = core.learning_curve(train_rows, n_train, pairs[n_train:], oracle_noise[n_train:], decision)
+                    oracle_noise: Sequence[str], decision, train_conditions: int) -> List[Dict]:
+    """k-NN and the best static threshold on the held-out pairs (those after the first ``n_train``) as the training
+    rows grow, against both oracles."""
+    curve = core.learning_curve(train_rows, train_conditions, pairs[n_train:], oracle[n_train:], decision)
+    curve_noise = core.learning_curve(train_rows, train_conditions, pairs[n_train:], oracle_noise[n_train:], decision)
     for c, cn in zip(curve, curve_noise):
         c.update(knn_noise=cn['knn'], static_noise=cn['static'])
     return curve
@@ -320,15 +330,21 @@ def summary_text(a: Analysis) -> str:
     from network_monitor.core.evaluation import OFFLOAD
     rows, pairs = a.rows, a.pairs
     wall = sum(core.number(r, 'wall_time') for r in rows if math.isfinite(core.number(r, 'wall_time')))
-    unpaired = sorted({r['condition'] for r in rows} - {p.condition for p in pairs})
+    learning = any(core.held_out(p.condition) for p in pairs)
+    # a learning plan's training conditions run once each: only a held-out one lacks a pair
+    unpaired = sorted({r['condition'] for r in rows if core.held_out(r['condition']) or not learning}
+                      - {p.condition for p in pairs})
     not_placed = sorted({r['id'] for r in rows if r.get('placed') == '0'})
     statuses: Dict[Tuple[str, str], int] = {}
     for r in rows:
         statuses[(r['decision'], r['mission_status'])] = statuses.get((r['decision'], r['mission_status']), 0) + 1
     either = sum(1 for o in a.oracle_noise if o == core.EITHER)
     return '\n'.join([
-        f'{_command(a.args)}: {len(rows)} runs, {len(pairs)} paired conditions '
-        f'({a.n_train} training, {a.n_test} held out), {wall / 3600:.2f} h of runs; control values: CT '
+        f'{_command(a.args)}: {len(rows)} runs, '
+        + (f'{a.trained_on} training conditions run once each in the placement the robot chose, {a.n_test} held-out '
+           f'conditions with both placements repeated' if learning else
+           f'{len(pairs)} paired conditions ({a.n_train} training, {a.n_test} held out)')
+        + f', {wall / 3600:.2f} h of runs; control values: CT '
         f'{a.control.ct_mean:.2f} s, CB {a.control.cb_mean:.6f} ({a.control.runs} runs, {a.control.date}).'
         + (f' Left out (--exclude): {", ".join(a.excluded)}.' if a.excluded else '')
         + (f' Without a pair: {", ".join(unpaired)}' + (f' (a placement not made: {", ".join(not_placed)})'
@@ -478,14 +494,14 @@ def decision_measures(a: Analysis, crossings: Crossings, good: Sequence[Any]) ->
                 print(f'campaign analyse: {exc}: its conditions left out of {SUMMARY_FILE}', file=sys.stderr)
                 continue
             learned += [t for t in read_training(a.args, task)[0] if t.source == 'local']
-    train = dm.split(ts, a.args.test_fraction)[0]
-    train_rows = dm.learned_during(learned, a.rows, {(t.task, t.condition) for t in train}, a.args.task)
+    trained_on = dm.training_keys(a.rows, ts, a.args.test_fraction, a.args.task)
+    train_rows = dm.learned_during(learned, a.rows, set(trained_on), a.args.task)
     elapsed = core.elapsed_time(a.all_rows)
     figures = dm.Figures(crossings.r_bw, crossings.r_bw_with_migration, crossings.rtt, crossings.fail_rtt,
                          dm.change_pct([p.onload.t_task for p in good], [p.offload.t_task for p in good]),
                          dm.change_pct([p.onload.b_task for p in good], [p.offload.b_task for p in good]),
                          elapsed / 3600.0 if elapsed > 0 else math.nan)
-    return dm.measures(ts, controls, train_rows, a.decision, a.args.test_fraction, figures)
+    return dm.measures(ts, controls, train_rows, a.decision, a.args.test_fraction, figures, trained_on=trained_on)
 
 
 def summary_table(m: dm.Measures) -> List[str]:

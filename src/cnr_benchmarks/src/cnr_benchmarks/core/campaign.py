@@ -85,6 +85,45 @@ def plan_document(task: str, location: str, settle: float, conditions: Sequence[
     return dict(task=task, location=location, settle=settle, runs=runs)
 
 
+HELD_OUT_PREFIX = 'h'       # a held-out condition's id in a learning plan (h0071): repeated per placement, never learned
+
+
+def held_out(condition: str) -> bool:
+    """Whether a condition id names a held-out condition of a learning plan (:func:`learning_plan_document`)."""
+    return condition.startswith(HELD_OUT_PREFIX)
+
+
+def learning_split(conditions: Sequence[Condition], test_fraction: float) -> List[Condition]:
+    """The conditions with the last ``round(n * test_fraction)`` renamed held-out (``c0071`` -> ``h0071``)."""
+    n_test = int(round(len(conditions) * test_fraction))
+    n_train = len(conditions) - n_test
+    return [c if i < n_train else Condition(HELD_OUT_PREFIX + c.id[1:], c.rtt_ms, c.rate, c.loss)
+            for i, c in enumerate(conditions)]
+
+
+def learning_plan_document(task: str, location: str, settle: float, conditions: Sequence[Condition],
+                           repeats: int) -> Dict:
+    """The learned decision's campaign: a training condition is run once, placed by the robot's policy with
+    exploration, and learned (what a robot in service does: one placement per task, the other one never seen); a
+    held-out condition (:func:`held_out`) is run ``repeats`` times per placement, onload and offload alternating, on
+    the profile of its first run, never learned: the noise-aware oracle's repeats (core.decision_measures)."""
+    if repeats < 1:
+        raise ValueError(f'repeats must be >= 1, got {repeats}')
+    runs = []
+    for c in conditions:
+        link = dict(delay=c.rtt_ms / 2.0, rate=c.rate, loss=c.loss)
+        if not held_out(c.id):
+            runs.append(dict(id=f'{c.id}-policy', condition=c.id, link=link, force='', decide=True, learn=True,
+                             explore=True, reuse_profile=False))
+            continue
+        for i in range(1, repeats + 1):
+            for placement in (ONLOAD, OFFLOAD):
+                runs.append(dict(id=f'{c.id}-{placement}-{i}', condition=c.id, link=link, force=placement,
+                                 decide=True, learn=False, explore=False, reuse_profile=bool(runs) and
+                                 runs[-1]['condition'] == c.id))
+    return dict(task=task, location=location, settle=settle, runs=runs)
+
+
 def control_plan(task: str, location: str, settle: float, runs: int) -> Dict:
     """The control experiment: ``runs`` runs with every module on the robot, no decision (thesis Table 4-5)."""
     return dict(task=task, location=location, settle=settle,

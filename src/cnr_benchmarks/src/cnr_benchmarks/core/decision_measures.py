@@ -42,7 +42,7 @@ from typing import Callable, Dict, List, Mapping, Optional, Sequence, Set, Tuple
 
 import numpy as np
 
-from cnr_benchmarks.core.campaign import EITHER, Threshold, agrees, best_threshold, noise_tolerance, number
+from cnr_benchmarks.core.campaign import EITHER, Threshold, agrees, best_threshold, held_out, noise_tolerance, number
 from network_monitor.core.decision import Decider, DecisionSettings, Exploration
 from network_monitor.core.evaluation import COMPLETED, OFFLOAD, ONLOAD, ControlValues, Outcome, evaluation_value
 from network_monitor.core.training import Row
@@ -107,7 +107,10 @@ def trials(rows: Sequence[Mapping[str, str]], default_task: str) -> List[Trial]:
 
 
 def split(ts: Sequence[Trial], test_fraction: float) -> Tuple[List[Trial], List[Trial]]:
-    """(training, held-out): per task, the last ``round(n * test_fraction)`` of its trials are held out."""
+    """(training, held-out): a learning plan's held-out conditions (core.campaign.held_out) are held out and the
+    other trials train; else, per task, the last ``round(n * test_fraction)`` of its trials are held out."""
+    if any(held_out(t.condition) for t in ts):
+        return [t for t in ts if not held_out(t.condition)], [t for t in ts if held_out(t.condition)]
     train: List[Trial] = []
     held: List[Trial] = []
     for task in tasks_of(ts):
@@ -116,6 +119,16 @@ def split(ts: Sequence[Trial], test_fraction: float) -> Tuple[List[Trial], List[
         train += mine[:len(mine) - n_test]
         held += mine[len(mine) - n_test:]
     return train, held
+
+
+def training_keys(rows: Sequence[Mapping[str, str]], ts: Sequence[Trial], test_fraction: float,
+                  default_task: str) -> List[Tuple[str, str]]:
+    """The ⟨task, condition⟩s the robot learned from, in order: in a learning plan every condition that is not held
+    out (each ran once, in the placement the robot chose: not a trial), else the training trials (:func:`split`)."""
+    keys = [(r.get('task') or default_task, r['condition']) for r in rows]
+    if any(held_out(c) for _, c in keys):
+        return list(dict.fromkeys(k for k in keys if not held_out(k[1])))
+    return [(t.task, t.condition) for t in split(ts, test_fraction)[0]]
 
 
 def tasks_of(ts: Sequence[Trial]) -> List[str]:
@@ -258,12 +271,15 @@ def _mean(v: Sequence[float]) -> float:
 
 def measures(ts: Sequence[Trial], controls: Mapping[str, ControlValues], training_rows: Sequence[Row],
              settings: DecisionSettings, test_fraction: float, figures: Figures,
-             max_rows: int = MAX_ROWS) -> Measures:
+             max_rows: int = MAX_ROWS, trained_on: Optional[Sequence[Tuple[str, str]]] = None) -> Measures:
     """The measures of a campaign's trials (module docstring). ``controls``: each task's control values (a task
     without is left out); ``training_rows``: the rows learned during the training conditions, in the order learned
-    (each row's ``task`` says whose); ``figures``: the thesis figures' numbers of the analysis."""
+    (each row's ``task`` says whose); ``figures``: the thesis figures' numbers of the analysis; ``trained_on``: the
+    training conditions (:func:`training_keys`; default the training trials)."""
     ts = [t for t in ts if t.task in controls]
     train, held = split(ts, test_fraction)
+    trained = [k for k in (trained_on if trained_on is not None else [(t.task, t.condition) for t in train])
+               if k[0] in controls]
     strict = [trial_oracle(t, controls[t.task], noise_aware=False) for t in ts]
     noise = {(t.task, t.condition): trial_oracle(t, controls[t.task]) for t in ts}
     policies: Dict[str, Policy] = {}            # task -> its k-NN
@@ -289,7 +305,7 @@ def measures(ts: Sequence[Trial], controls: Mapping[str, ControlValues], trainin
     for task in tasks_of(ts):
         mine, everything = [t for t in held if t.task == task], [t for t in ts if t.task == task]
         per_task[task] = TaskMeasures(
-            task=task, conditions=len(everything), training_conditions=sum(t.task == task for t in train),
+            task=task, conditions=len(everything), training_conditions=sum(k[0] == task for k in trained),
             held_out=len(mine), offload_better=sum(o == OFFLOAD for t, o in zip(ts, strict) if t.task == task),
             offload_beyond_noise=sum(label(t) == OFFLOAD for t in everything), knn_rows=knn_rows[task],
             knn_accuracy=accuracy([knn(t) for t in mine], [label(t) for t in mine]),
@@ -300,7 +316,7 @@ def measures(ts: Sequence[Trial], controls: Mapping[str, ControlValues], trainin
     best_rule = min(rule_regret, key=rule_regret.get) if held else None
     summary = dict(
         offload_better_share=_num(strict.count(OFFLOAD) / len(ts) if ts else math.nan),
-        tasks=tasks_of(ts), training_conditions=len(train), knn_noise_aware_accuracy_40=_num(knn_acc),
+        tasks=tasks_of(ts), training_conditions=len(trained), knn_noise_aware_accuracy_40=_num(knn_acc),
         regret_knn=_num(mean_regret(knn, held)),
         regret_best_a_priori=_num(rule_regret[best_rule]) if best_rule else None, best_a_priori_rule=best_rule,
         knn_minus_best_single_threshold_pts=_num(100.0 * (knn_acc - hindsight(held).accuracy)),
