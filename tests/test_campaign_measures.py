@@ -253,20 +253,32 @@ def test_without_held_out_conditions_the_measures_are_null_with_a_reason():
 
 
 # ---------------------------------------------------------------- campaign_summary.json by the analysis
-def test_the_analysis_writes_campaign_summary_json_and_its_table(tmp_path, monkeypatch):
-    """A 10-condition corridor campaign (offload better on a short RTT): the page and campaign_summary.json from
-    --analyse-only, the training set read from the published training_set.tsv beside the rows. (Fig. 5-1, a map
-    of 14 400 k-NN queries that this test does not look at, is drawn empty.)"""
+def analyse(tmp_path, monkeypatch, rows, learned):
+    """``rows`` and the robot's ``learned`` rows written as a campaign's results.tsv and training_set.tsv in
+    ``tmp_path/campaign``, analysed by ``exp_campaign.sh --analyse-only`` (control CT 30 s, CB 0.003). Fig. 5-1, a map
+    of 14 400 k-NN queries that these tests do not look at, is drawn empty."""
     import matplotlib.pyplot as plt
     from cnr_benchmarks import campaign as script
     from cnr_benchmarks import campaign_figures
-    monkeypatch.setattr(campaign_figures, 'fig_decision_map', lambda a: plt.subplots()[0])
     from cnr_mission.core.task import RESULT_COLUMNS
-    control = ControlValues('corridor_round_trip', 30.0, 0.3, 0.003, 0.00003, 20, '2026-11-28', 'test')
+    monkeypatch.setattr(campaign_figures, 'fig_decision_map', lambda a: plt.subplots()[0])
     values = str(tmp_path / 'control_values.yaml')
-    write_control_values(values, control)
+    write_control_values(values, ControlValues('corridor_round_trip', 30.0, 0.3, 0.003, 0.00003, 20, '2026-11-28',
+                                               'test'))
     out = tmp_path / 'campaign'
     out.mkdir()
+    with open(out / 'results.tsv', 'w', newline='') as f:
+        w = csv.DictWriter(f, RESULT_COLUMNS, delimiter='\t', lineterminator='\n')
+        w.writeheader()
+        w.writerows(rows)
+    (out / 'training_set.tsv').write_text(HEADER + '\n' + ''.join(format_row(r) + '\n' for r in learned))
+    assert script.main(['campaign', '--analyse-only', '--out', str(out), '--control-values', values]) == 0
+
+
+def test_the_analysis_writes_campaign_summary_json_and_its_table(tmp_path, monkeypatch):
+    """A 10-condition corridor campaign (offload better on a short RTT): the page and campaign_summary.json from
+    --analyse-only, the training set read from the published training_set.tsv beside the rows."""
+    out = tmp_path / 'campaign'
     rows, learned, t0 = [], [], 1.8e9
     for i in range(10):
         c_l, r_bw = (0.02, 50.0) if i % 2 else (0.15, 3.0)
@@ -281,12 +293,7 @@ def test_the_analysis_writes_campaign_summary_json_and_its_table(tmp_path, monke
                              t_task=30 * v, b_task=0.003 * v, value=v, good=1, label=label, learned=1,
                              wall_start=start, wall_time=40))
             learned.append(_training_row(c_l, r_bw, label, 'corridor_round_trip', start + 30 - 1.7e9))
-    with open(out / 'results.tsv', 'w', newline='') as f:
-        w = csv.DictWriter(f, RESULT_COLUMNS, delimiter='\t', lineterminator='\n')
-        w.writeheader()
-        w.writerows(rows)
-    (out / 'training_set.tsv').write_text(HEADER + '\n' + ''.join(format_row(r) + '\n' for r in learned))
-    assert script.main(['campaign', '--analyse-only', '--out', str(out), '--control-values', values]) == 0
+    analyse(tmp_path, monkeypatch, rows, learned)
     summary = json.loads((out / 'campaign_summary.json').read_text())
     assert list(summary) == list(dm.SUMMARY_KEYS) + ['per_task']
     assert summary['tasks'] == ['corridor_round_trip'] and summary['training_conditions'] == 7
@@ -298,7 +305,8 @@ def test_the_analysis_writes_campaign_summary_json_and_its_table(tmp_path, monke
     assert '| `knn_noise_aware_accuracy_40` | goal ≥ 90 %' in page
     assert '| `crossing_rbw` | ≈ 4.9 (Fig. 5-2) |' in page
     assert '| corridor_round_trip | 10 (7 / 3) |' in page
-    assert list(campaign_figures.SUMMARY_BESIDE) == list(dm.SUMMARY_KEYS)      # every key beside the thesis
+    from cnr_benchmarks.campaign_figures import SUMMARY_BESIDE
+    assert list(SUMMARY_BESIDE) == list(dm.SUMMARY_KEYS)      # every key beside the thesis
 
 
 def test_rows_learned_during_the_runs_of_each_task():
@@ -366,16 +374,7 @@ def test_a_learning_plan_holds_out_its_held_out_conditions_and_trains_on_every_o
 def test_the_analysis_of_a_learning_plan(tmp_path, monkeypatch):
     """10 training conditions run once each (the robot's choice, learned) and 4 held-out ones run twice per
     placement: the held-out ones are the measured trials, the robot's 10 rows its k-NN's."""
-    import matplotlib.pyplot as plt
-    from cnr_benchmarks import campaign as script
-    from cnr_benchmarks import campaign_figures
-    monkeypatch.setattr(campaign_figures, 'fig_decision_map', lambda a: plt.subplots()[0])
-    from cnr_mission.core.task import RESULT_COLUMNS
-    control = ControlValues('corridor_round_trip', 30.0, 0.3, 0.003, 0.00003, 20, '2026-11-28', 'test')
-    values = str(tmp_path / 'control_values.yaml')
-    write_control_values(values, control)
     out = tmp_path / 'campaign'
-    out.mkdir()
     rows, learned, t0 = [], [], 1.8e9
 
     def add(cid, i, placement, learn, start):
@@ -395,12 +394,7 @@ def test_the_analysis_of_a_learning_plan(tmp_path, monkeypatch):
     for j, i in enumerate(range(10, 14)):
         for k, placement in enumerate((ONLOAD, OFFLOAD, ONLOAD, OFFLOAD)):
             add(f'h{i:04d}', i, placement, False, t0 + 500 + 200 * j + 50 * k)
-    with open(out / 'results.tsv', 'w', newline='') as f:
-        w = csv.DictWriter(f, RESULT_COLUMNS, delimiter='\t', lineterminator='\n')
-        w.writeheader()
-        w.writerows(rows)
-    (out / 'training_set.tsv').write_text(HEADER + '\n' + ''.join(format_row(r) + '\n' for r in learned))
-    assert script.main(['campaign', '--analyse-only', '--out', str(out), '--control-values', values]) == 0
+    analyse(tmp_path, monkeypatch, rows, learned)
     summary = json.loads((out / 'campaign_summary.json').read_text())
     assert summary['training_conditions'] == 10 and summary['per_task']['corridor_round_trip']['held_out'] == 4
     assert summary['per_task']['corridor_round_trip']['knn_rows'] == 10
