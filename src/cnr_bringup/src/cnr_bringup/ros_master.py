@@ -18,16 +18,16 @@ def ros_master(argv: Optional[List[str]]) -> int:
     ap = Parser(PROG, __doc__)
     ap.add_argument('--host', help='master host (default: ROS_MASTER_URI, else localhost)')
     ap.add_argument('--port', type=port_number, help='master port (default: ROS_MASTER_URI, else 11311)')
-    ap.add_argument('--workers', type=int, help="the master's threads that tell subscribers of new publishers "
-                    "(roscore -w; default roscore's 3). With a bridge to another host give more than the other "
-                    "host has nodes (config/testbed.yaml master_workers says why)")
+    ap.add_argument('--multi-master', action='store_true',
+                    help="one host's master of several joined by multimaster_bridge: its calls to the other host's "
+                         "nodes (a dead link hangs them) never hold up its own nodes' (cnr_harness.rosmaster)")
     args = ap.parse_args(argv)
     _, port = master_address(args.host, args.port)
     uri = os.environ['ROS_MASTER_URI']
     if master_up():
         raise ScriptError(f'a master already answers at {uri}')
     with Processes() as procs:
-        procs.ensure_master(PROG, port, args.workers)
+        procs.ensure_master(PROG, port, args.multi_master)
         log(PROG, f'master up: export ROS_MASTER_URI={uri}   (Ctrl-C to stop)')
         return procs.popens[0].wait()
 

@@ -131,14 +131,16 @@ class Processes:
         self.popens.append(popen)
         return popen
 
-    def ensure_master(self, prog: str, port: int, workers: Optional[int] = None) -> None:
-        """Start ``roscore -p PORT`` (``-w WORKERS``: the master's notification threads, when given) unless a master
-        answers at ``ROS_MASTER_URI``; wait until it answers."""
+    def ensure_master(self, prog: str, port: int, multi_master: bool = False) -> None:
+        """Start ``roscore -p PORT`` unless a master answers at ``ROS_MASTER_URI``; wait until it answers. With
+        ``multi_master``, the master of one host of several (:mod:`cnr_harness.rosmaster`, whose calls to the other
+        host's nodes never hold up its own) and rosout instead."""
         if master_up():
             log(prog, f'using the running master at {os.environ["ROS_MASTER_URI"]}')
             return
-        log(prog, f'starting roscore on port {port}')
-        roscore = self.start(['roscore', '-p', str(port), *(['-w', str(workers)] if workers else [])])
+        log(prog, f'starting {"the master" if multi_master else "roscore"} on port {port}')
+        roscore = self.start([sys.executable, '-m', 'cnr_harness.rosmaster', '--core', '-p', str(port)]
+                             if multi_master else ['roscore', '-p', str(port)])
 
         def answers() -> bool:
             if roscore.poll() is not None:
@@ -149,6 +151,8 @@ class Processes:
         except WaitTimeout:
             raise ScriptError(f'no master answered at {os.environ["ROS_MASTER_URI"]} after '
                               f'{MASTER_START_TIMEOUT:.0f} s') from None
+        if multi_master:
+            self.start(['rosrun', 'rosout', 'rosout'])
 
     def stop(self) -> None:
         for popen in reversed(self.popens):

@@ -15,6 +15,7 @@ then SIGTERM, then SIGKILL).
 from __future__ import annotations
 
 import os
+import sys
 import tempfile
 import time
 import xmlrpc.client
@@ -66,10 +67,10 @@ class RosSide:
 
     def start_master(self, use_sim_time: bool = False, timeout: float = 20.0,
                      prefix: Sequence[str] = ()) -> None:
-        """The side's rosmaster with the testbed's ``master_workers`` notification threads; ``prefix`` wraps the
-        command (e.g. :func:`cnr_testbed.cpucap.run_argv`'s)."""
-        self.master = self.run([*prefix, 'rosmaster', '--core', '-p', str(self.port),
-                                '-w', str(self.testbed.cfg.master_workers)], 'rosmaster')
+        """The side's rosmaster, one host's of several (:mod:`cnr_harness.rosmaster`: its calls to the other side's
+        nodes never hold up its own); ``prefix`` wraps the command (e.g. :func:`cnr_testbed.cpucap.run_argv`'s)."""
+        self.master = self.run([*prefix, sys.executable, '-m', 'cnr_harness.rosmaster', '--core', '-p',
+                                str(self.port)], 'rosmaster')
         wait_until(self.master_up, timeout, f'the rosmaster of {self.side}', self.master)
         self.call('setParam', '/use_sim_time', use_sim_time)
 

@@ -1,0 +1,45 @@
+"""cnr_harness.rosmaster's NodeDispatcher, rosmaster's notification pool per node: one node's calls in order, never
+waiting behind another node's, no thread while there is no work. ROS-free (no master)."""
+import threading
+
+from cnr_harness import wait_until
+from cnr_harness.rosmaster import NodeDispatcher
+
+
+def test_a_hung_node_holds_up_only_its_own_calls():
+    pool = NodeDispatcher(3)
+    release = threading.Event()
+    done = []
+    for i in range(8):                      # more hung nodes than rosmaster's 3 threads
+        pool.queue_task(f'http://cloud:{i}/', release.wait, (60,))
+    pool.queue_task('http://robot:1/', done.append, ('local',))
+    wait_until(lambda: done == ['local'], 5.0, 'the local node\'s call behind 8 hung ones')
+    release.set()
+    wait_until(lambda: pool.pending() == 0 and pool.get_thread_count() == 0, 5.0, 'the hung calls to end')
+
+
+def test_one_node_s_calls_run_in_order_and_report_their_results():
+    pool = NodeDispatcher(3)
+    gate = threading.Event()
+    order, results = [], []
+    pool.queue_task('n', gate.wait, (5,))
+    for i in range(5):
+        pool.queue_task('n', order.append, (i,), results.append)
+    gate.set()
+    wait_until(lambda: order == [0, 1, 2, 3, 4], 5.0, 'the calls in order')
+    wait_until(lambda: len(results) == 5, 5.0, 'the callbacks')
+
+
+def test_a_failing_call_is_logged_and_the_next_one_runs(caplog):
+    pool = NodeDispatcher(3)
+    done = []
+    pool.queue_task('n', lambda: 1 / 0)
+    pool.queue_task('n', done.append, ('next',))
+    wait_until(lambda: done == ['next'], 5.0, 'the call after a failing one')
+    assert 'ZeroDivisionError' in caplog.text
+
+
+def test_after_join_all_nothing_is_queued():
+    pool = NodeDispatcher(3)
+    pool.join_all(wait_for_tasks=False, wait_for_threads=False)
+    assert pool.queue_task('n', print, ('x',)) is False and pool.pending() == 0
