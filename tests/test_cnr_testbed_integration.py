@@ -70,6 +70,14 @@ def test_each_host_has_the_configured_network_settings(testbed, workspace):
             assert r.stdout.strip() == str(value), (side, key, r.stdout, r.stderr)
 
 
+def test_the_link_emulator_forwards_at_its_priority(testbed, workspace):
+    from cnr_params import load_yaml
+    nice = load_yaml(f'{workspace}/config/testbed.yaml')['testbed']['emulator_nice']
+    sup = int(open(f'/run/cnr_testbed/{NAME}.pid').read())
+    child = int(subprocess.run(['pgrep', '-P', str(sup)], capture_output=True, text=True).stdout.split()[0])
+    assert os.getpriority(os.PRIO_PROCESS, child) == nice
+
+
 def test_down_leaves_nothing_and_sigkill_is_cleaned_up(workspace):
     assert script(workspace, 'up').returncode == 0
     sup = int(open(f'/run/cnr_testbed/{NAME}.pid').read())

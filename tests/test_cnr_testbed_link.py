@@ -121,6 +121,7 @@ def write(tmp_path, name, text):
     (lambda t: t['robot'].pop('device'), 'testbed.robot.device: missing'),
     (lambda t: t['link']['both'].pop('queue'), 'testbed.link.both.queue: missing'),
     (lambda t: t.pop('sysctl'), 'testbed.sysctl: missing'),
+    (lambda t: t.update(emulator_nice=-21), 'testbed.emulator_nice'),
     (lambda t: t['sysctl_if_available'].update({'vm.swappiness': 1}), 'testbed.sysctl_if_available.vm.swappiness'),
     (lambda t: t['sysctl'].update({'kernel.panic': 1}), 'testbed.sysctl.kernel.panic'),
     (lambda t: t['sysctl'].update({'net.ipv4.tcp_thin_linear_timeouts': 'yes'}), 'tcp_thin_linear_timeouts'),

@@ -159,6 +159,7 @@ def supervise(cfg: TestbedConfig) -> int:
         signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))
         code = 0
         try:
+            os.setpriority(os.PRIO_PROCESS, 0, cfg.emulator_nice)   # the link is no host's CPU consumer
             Forwarder(cfg).run()
         except SystemExit:
             pass

@@ -56,6 +56,7 @@ class TestbedConfig:
     robot_cpu: RobotCpuConfig
     sysctl: Dict[str, int]    # per-namespace kernel settings (net.*) written in both namespaces at start
     sysctl_if_available: Dict[str, int]   # the same, skipped (with a note) where the kernel lacks the setting
+    emulator_nice: int        # the link emulator's nice value (-20..19)
 
 
 SYSCTL_RE = re.compile(r'^net(\.[a-z0-9_]+)+$')
@@ -131,7 +132,8 @@ def load_testbed(path: str, overrides: Optional[Dict[str, str]] = None) -> Testb
                         down=conditions_from(link.section('down', {}), both),
                         robot_cpu=robot_cpu_from(t.section('robot_cpu')),
                         sysctl=sysctl_from(t.section('sysctl')),
-                        sysctl_if_available=sysctl_from(t.section('sysctl_if_available')))
+                        sysctl_if_available=sysctl_from(t.section('sysctl_if_available')),
+                        emulator_nice=t.integer('emulator_nice', minimum=-20, maximum=19))
     if cfg.robot_ns == cfg.cloud_ns:
         raise cloud.error('namespace', 'must differ from the robot namespace')
     return cfg
