@@ -1,25 +1,27 @@
-"""cnr_harness.rosmaster's NodeDispatcher, rosmaster's notification pool per node: one node's calls in order, never
-waiting behind another node's, no thread while there is no work. ROS-free (no master)."""
+"""cnr_harness.rosmaster's NodeDispatcher, rosmaster's notification pool per node: one node's calls in order, at most
+the pool's size at once, a hung call never holding up another node's, no thread while there is no work. ROS-free
+(no master)."""
 import threading
+import time
 
 from cnr_harness import wait_until
 from cnr_harness.rosmaster import NodeDispatcher
 
 
 def test_a_hung_node_holds_up_only_its_own_calls():
-    pool = NodeDispatcher(3)
+    pool = NodeDispatcher(3, hang_after=0.2)
     release = threading.Event()
     done = []
     for i in range(8):                      # more hung nodes than rosmaster's 3 threads
         pool.queue_task(f'http://cloud:{i}/', release.wait, (60,))
     pool.queue_task('http://robot:1/', done.append, ('local',))
-    wait_until(lambda: done == ['local'], 5.0, 'the local node\'s call behind 8 hung ones')
+    wait_until(lambda: done == ['local'], 2.0, 'the local node\'s call behind 8 hung ones')
     release.set()
     wait_until(lambda: pool.pending() == 0 and pool.get_thread_count() == 0, 5.0, 'the hung calls to end')
 
 
 def test_one_node_s_calls_run_in_order_and_report_their_results():
-    pool = NodeDispatcher(3)
+    pool = NodeDispatcher(3, hang_after=0.2)
     gate = threading.Event()
     order, results = [], []
     pool.queue_task('n', gate.wait, (5,))
@@ -31,12 +33,29 @@ def test_one_node_s_calls_run_in_order_and_report_their_results():
 
 
 def test_a_failing_call_is_logged_and_the_next_one_runs(caplog):
-    pool = NodeDispatcher(3)
+    pool = NodeDispatcher(3, hang_after=0.2)
     done = []
     pool.queue_task('n', lambda: 1 / 0)
     pool.queue_task('n', done.append, ('next',))
     wait_until(lambda: done == ['next'], 5.0, 'the call after a failing one')
     assert 'ZeroDivisionError' in caplog.text
+
+
+def test_at_most_the_pool_s_size_of_answering_calls_run_at_once():
+    pool = NodeDispatcher(3, hang_after=5.0)
+    lock, running, most = threading.Lock(), [0], [0]
+
+    def call():
+        with lock:
+            running[0] += 1
+            most[0] = max(most[0], running[0])
+        time.sleep(0.1)
+        with lock:
+            running[0] -= 1
+    for i in range(9):
+        pool.queue_task(f'http://robot:{i}/', call)
+    wait_until(lambda: pool.pending() == 0, 5.0, 'the nine calls')
+    assert most[0] == 3
 
 
 def test_after_join_all_nothing_is_queued():

@@ -9,11 +9,15 @@ for a connection with the retransmission timeout capped at 1 s, 127 s without). 
 stall every notification behind them, this host's own nodes' too: a robot node does not hear of a new local
 publisher, and a restarted module instance is not heard by the migration manager, until the link has been back for
 a while. More threads do not help at a price worth paying: an idle pool thread polls for work 10 times a second
-(``rosmaster -w 64`` idles at 0.11 CPU, 0.002 with 3 threads; on the robot's CPU cap a third of its budget).
+(``rosmaster -w 64`` idles at 0.11 CPU, 0.002 with 3 threads; on the robot's CPU cap a third of its budget), and
+after an outage, when the bridge registers the other host's hundred-odd nodes again at once, every notification
+running at the same time slowed the master's answers to the bridge itself (one such re-registration took 2.7 s
+instead of well under 1 s).
 
-:class:`NodeDispatcher` keeps the pool's semantics per node and nothing else: the tasks of one marker (a node's
-XML-RPC URI) run in order, in a thread that exists while that node has work; another node's tasks never wait behind
-them; no thread polls.
+:class:`NodeDispatcher` keeps the pool's semantics and bounds what hangs: the tasks of one marker (a node's XML-RPC
+URI) run in order, in a thread that exists while that node has work; at most ``threads`` calls run at once, as in
+rosmaster's pool, but a call that has not returned within ``hang_after`` seconds stops counting (it waits on a dead
+link or a hung node), so it never holds up another node's; no thread polls.
 """
 from __future__ import annotations
 
@@ -25,17 +29,21 @@ from collections import deque
 from typing import Any, Callable, Deque, Dict, List, Optional, Tuple
 
 Task = Tuple[Callable[..., Any], tuple, Optional[Callable[[Any], None]]]
+HANG_AFTER = 0.25       # s a notification call may take before it stops counting against the pool's size (one
+                        # across a dead link never returns; a slow local one only lets one more call run)
 
 
 class NodeDispatcher:
     """A drop-in for ``rosmaster.threadpool.MarkedThreadPool`` (``queue_task``, ``join_all``, the thread count):
-    per marker, tasks run in order in a thread of their own while there are any (module docstring). ``threads`` is
-    rosmaster's worker count (``-w``), not used: a node's calls never wait for another node's."""
+    per marker, tasks run in order in a thread of their own while there are any; at most ``threads`` (rosmaster's
+    ``-w``) at once, a call counting for ``hang_after`` seconds at most (module docstring)."""
 
-    def __init__(self, threads: int = 0) -> None:
+    def __init__(self, threads: int, hang_after: float = HANG_AFTER) -> None:
         self._lock = threading.Lock()
         self._queues: Dict[Any, Deque[Task]] = {}
         self._joining = False
+        self._slots = threading.BoundedSemaphore(max(1, threads))
+        self.hang_after = hang_after
 
     def queue_task(self, marker: Any, task: Callable[..., Any], args: Optional[tuple] = None,
                    taskCallback: Optional[Callable[[Any], None]] = None) -> bool:
@@ -59,12 +67,20 @@ class NodeDispatcher:
                     del self._queues[key]
                     return
                 task, args, callback = queue.popleft()
+            self._slots.acquire()
+            slot = _Slot(self._slots)
+            timer = threading.Timer(self.hang_after, slot.release)   # a call that hangs stops counting
+            timer.daemon = True
+            timer.start()
             try:
                 result = task(*args)
                 if callback is not None:
                     callback(result)
             except Exception:                                   # as rosmaster's pool: logged, the next task runs
                 logging.getLogger('rosmaster.threadpool').error(traceback.format_exc())
+            finally:
+                timer.cancel()
+                slot.release()
 
     def pending(self) -> int:
         """Tasks queued or running (for tests)."""
@@ -81,6 +97,22 @@ class NodeDispatcher:
     def get_thread_count(self) -> int:
         with self._lock:
             return len(self._queues)
+
+
+class _Slot:
+    """One call's place in the pool, given back once: when the call returns or when it is deemed hung."""
+
+    def __init__(self, slots: threading.BoundedSemaphore) -> None:
+        self._slots = slots
+        self._lock = threading.Lock()
+        self._held = True
+
+    def release(self) -> None:
+        with self._lock:
+            if not self._held:
+                return
+            self._held = False
+        self._slots.release()
 
 
 def main(argv: Optional[List[str]] = None) -> None:
