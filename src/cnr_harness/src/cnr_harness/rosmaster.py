@@ -10,9 +10,9 @@ stall every notification behind them, this host's own nodes' too: a robot node d
 publisher, and a restarted module instance is not heard by the migration manager, until the link has been back for
 a while. More threads do not help at a price worth paying: an idle pool thread polls for work 10 times a second
 (``rosmaster -w 64`` idles at 0.11 CPU, 0.002 with 3 threads; on the robot's CPU cap a third of its budget), and
-after an outage, when the bridge registers the other host's hundred-odd nodes again at once, every notification
-running at the same time slowed the master's answers to the bridge itself (one such re-registration took 2.7 s
-instead of well under 1 s).
+after an outage, when the bridge registers the other host's hundred-odd registrations again at once, every
+notification running at the same time slowed the master's answers to the bridge itself (bench_flap.sh, the same
+1.8 s cut of the same schedule: re-registered in 2.7 s with them all at once, 0.33 s with rosmaster's pool).
 
 :class:`NodeDispatcher` keeps the pool's semantics and bounds what hangs: the tasks of one marker (a node's XML-RPC
 URI) run in order, in a thread that exists while that node has work; at most ``threads`` calls run at once, as in
