@@ -24,6 +24,7 @@ from __future__ import annotations
 import logging
 import sys
 import threading
+import time
 import traceback
 from collections import deque
 from typing import Any, Callable, Deque, Dict, List, Optional, Tuple
@@ -42,8 +43,11 @@ class NodeDispatcher:
         self._lock = threading.Lock()
         self._queues: Dict[Any, Deque[Task]] = {}
         self._joining = False
-        self._slots = threading.BoundedSemaphore(max(1, threads))
         self.hang_after = hang_after
+        self._slots = threading.Condition()         # guards the two below
+        self._free = max(1, threads)
+        self._counting: Dict[int, float] = {}      # running call -> monotonic time it stops counting
+        self._calls = 0
 
     def queue_task(self, marker: Any, task: Callable[..., Any], args: Optional[tuple] = None,
                    taskCallback: Optional[Callable[[Any], None]] = None) -> bool:
@@ -67,11 +71,7 @@ class NodeDispatcher:
                     del self._queues[key]
                     return
                 task, args, callback = queue.popleft()
-            self._slots.acquire()
-            slot = _Slot(self._slots)
-            timer = threading.Timer(self.hang_after, slot.release)   # a call that hangs stops counting
-            timer.daemon = True
-            timer.start()
+            call = self._start_call()
             try:
                 result = task(*args)
                 if callback is not None:
@@ -79,8 +79,29 @@ class NodeDispatcher:
             except Exception:                                   # as rosmaster's pool: logged, the next task runs
                 logging.getLogger('rosmaster.threadpool').error(traceback.format_exc())
             finally:
-                timer.cancel()
-                slot.release()
+                self._end_call(call)
+
+    def _start_call(self) -> int:
+        """Wait for a free place (a call that returned, or one that stopped counting: no timer thread, a waiter
+        frees those itself) and take it."""
+        with self._slots:
+            while self._free == 0:
+                now = time.monotonic()
+                for call in [c for c, until in self._counting.items() if until <= now]:
+                    del self._counting[call]
+                    self._free += 1
+                if self._free == 0:
+                    self._slots.wait(min(self._counting.values()) - now)
+            self._free -= 1
+            self._calls += 1
+            self._counting[self._calls] = time.monotonic() + self.hang_after
+            return self._calls
+
+    def _end_call(self, call: int) -> None:
+        with self._slots:
+            if self._counting.pop(call, None) is not None:      # not already given up as hung
+                self._free += 1
+                self._slots.notify()
 
     def pending(self) -> int:
         """Tasks queued or running (for tests)."""
@@ -97,22 +118,6 @@ class NodeDispatcher:
     def get_thread_count(self) -> int:
         with self._lock:
             return len(self._queues)
-
-
-class _Slot:
-    """One call's place in the pool, given back once: when the call returns or when it is deemed hung."""
-
-    def __init__(self, slots: threading.BoundedSemaphore) -> None:
-        self._slots = slots
-        self._lock = threading.Lock()
-        self._held = True
-
-    def release(self) -> None:
-        with self._lock:
-            if not self._held:
-                return
-            self._held = False
-        self._slots.release()
 
 
 def main(argv: Optional[List[str]] = None) -> None:
