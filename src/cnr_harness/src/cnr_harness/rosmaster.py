@@ -4,8 +4,8 @@ cnr_harness.rosmaster [rosmaster's arguments]``, e.g. ``--core -p 11311``).
 A master tells each subscriber of a topic about a new publisher (``publisherUpdate``, an XML-RPC call to the
 subscriber's node) from a pool of threads, rosmaster's ``MarkedThreadPool``: 3 threads by default, the calls to one
 node one at a time. In a multi-master set-up the other host's subscribers are registered here by the bridge with
-their own addresses, so some of these calls cross the link; with the link down each hangs until TCP gives up (7 s
-for a connection with the retransmission timeout capped at 1 s, 127 s without). With 3 threads a few such calls
+their own addresses, so some of these calls cross the link; with the link down each hangs until TCP gives up (127
+s for a connection, minutes for a request already sent). With 3 threads a few such calls
 stall every notification behind them, this host's own nodes' too: a robot node does not hear of a new local
 publisher, and a restarted module instance is not heard by the migration manager, until the link has been back for
 a while. More threads do not help at a price worth paying: an idle pool thread polls for work 10 times a second
