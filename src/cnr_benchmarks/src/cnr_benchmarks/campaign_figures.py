@@ -131,7 +131,7 @@ def load_analysis(args: argparse.Namespace) -> Union[Analysis, int]:
         # once each, so mostly not pairs)
         pairs = [p for p in pairs if not core.held_out(p.condition)] + [p for p in pairs if core.held_out(p.condition)]
         n_test = sum(core.held_out(p.condition) for p in pairs)
-        trained_on = {(args.task, r['condition']) for r in rows if not core.held_out(r['condition'])}
+        trained_on = set(dm.training_keys(rows, dm.trials(rows, args.task), args.test_fraction, args.task))
     else:
         n_test = int(round(len(pairs) * args.test_fraction))
         trained_on = {(args.task, p.condition) for p in pairs[:len(pairs) - n_test]}
