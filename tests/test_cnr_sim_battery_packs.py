@@ -141,6 +141,22 @@ def test_task_b_task_is_the_computer_pack_and_b_base_the_base_pack():
     assert runner['base_battery_topic'] == '/' + cfg.base_pack.topic
 
 
+def test_a_decided_runs_b_task_counts_the_decision_and_a_pack_is_read_between_readings():
+    from cnr_mission.core.task import battery_fields, charge_at
+    readings = [(10.0, 0.90), (11.0, 0.89), (12.0, 0.88)]
+    assert charge_at(readings, 9.5) is None                           # before the first reading: unknown
+    assert charge_at(readings, 10.0) == pytest.approx(0.90)
+    assert charge_at(readings, 10.25) == pytest.approx(0.8975)        # between the two around it
+    assert charge_at(readings, 12.7) == pytest.approx(0.88)           # after the last: the last
+    assert charge_at([(5.0, 0.5), (5.0, 0.4)], 5.0) == pytest.approx(0.4)
+    fields = battery_fields(computer=(0.89, 0.80), base=(0.7, 0.69), decided=True, at_decision=0.8975)
+    assert fields['b_task'] == pytest.approx(0.0975) and fields['b_decision'] == pytest.approx(0.0075)
+    assert fields['b_base'] == pytest.approx(0.01)                    # the base's: the drive alone
+    no_reading = battery_fields(computer=(0.89, 0.80), base=(0.7, 0.69), decided=True, at_decision=None)
+    assert no_reading['b_task'] != no_reading['b_task']               # NaN: the run is invalid
+    assert 'b_decision' not in battery_fields(computer=(0.89, 0.80), base=(0.7, 0.69))   # a control run
+
+
 def test_results_files_with_one_pack_are_read_and_appended_in_their_columns(tmp_path):
     from cnr_mission.core.task import RESULT_COLUMNS, RESULT_COLUMNS_ONE_PACK, append_result, read_results
     committed = os.path.join(WS, 'docs', 'results', 'campaign', 'results.tsv')
@@ -159,10 +175,24 @@ def test_results_files_with_one_pack_are_read_and_appended_in_their_columns(tmp_
     append_result(new, dict(id='y', condition='c', b_task=0.005, b_base=0.01))
     (row,), _ = read_results(new)
     assert row['b_base'] == '0.01' and list(row) == list(RESULT_COLUMNS)
+    # two packs, from before the decision's cost was counted: b_base read, t_decision and b_decision empty
+    two = tmp_path / 'two.tsv'
+    two_columns = [c for c in RESULT_COLUMNS if c not in ('t_decision', 'b_decision')]
+    two.write_text('\t'.join(two_columns) + '\n' + '\t'.join('0.01' if c == 'b_base' else 'v' for c in two_columns)
+                   + '\n')
+    (row,), warnings = read_results(str(two))
+    assert not warnings and row['b_base'] == '0.01' and row['t_decision'] == '' and list(row) == list(RESULT_COLUMNS)
+    append_result(str(two), dict(id='w', condition='c', b_task=0.005, t_decision=0.4))
+    assert two.read_text().splitlines()[-1].split('\t') == [
+        'w' if c == 'id' else 'c' if c == 'condition' else '0.005' if c == 'b_task' else '' for c in two_columns]
     bad = tmp_path / 'bad.tsv'
     bad.write_text('id\tcondition\n')
     with pytest.raises(ConfigError, match='header'):
         read_results(str(bad))
+    shuffled = tmp_path / 'shuffled.tsv'      # every column, but not in their order
+    shuffled.write_text('\t'.join(reversed(RESULT_COLUMNS)) + '\n')
+    with pytest.raises(ConfigError, match='header'):
+        read_results(str(shuffled))
     with pytest.raises(ConfigError, match='header'):
         append_result(str(bad), dict(id='z'))
 

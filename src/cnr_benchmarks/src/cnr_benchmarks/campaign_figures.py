@@ -371,6 +371,12 @@ def time_budget(a: Analysis) -> str:
               f'conditions in {_fmt(100 * pair_wall / 3600, 2)} h; onload run {med_of(on, "wall_time")} s '
               f'(task {med_of(on, "t_task")} s), offload run {med_of(off, "wall_time")} s (task '
               f'{med_of(off, "t_task")} s, placing {med_of(off, "placing_time")} s).')
+    decided = [r for r in a.all_rows if r.get('t_decision')]
+    budget += (f' A decided run\'s task time counts its decision (profile and placing: median '
+               f'{med_of(decided, "t_decision")} s, battery '
+               f'{_fmt(_median([core.number(r, "b_decision") for r in decided]), 6)}), as a robot that decides '
+               f'pays it.' if decided else ' The task times are the drives alone (these runs did not record the '
+               f'decision\'s own cost).')
     elapsed = core.elapsed_time(a.all_rows)               # every condition run, left out or not
     n_run = len({r['condition'] for r in a.all_rows})
     if n_run and elapsed > 0:

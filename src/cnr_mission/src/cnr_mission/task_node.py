@@ -6,17 +6,19 @@ Per run: set the link (testbed emulator), put the robot at the task's start (the
 ``~decide`` (the modules home, the network monitor's window filled with the new link for ``settle`` s, profile,
 k-NN, placement; or the previous run's profile with ``reuse_profile``), drive the goals with
 move_base's action, measure T_task (sim time) and B_task (the robot computer's battery, ``battery_topic``; the
-base's, ``base_battery_topic``, recorded beside it as ``b_base``), ``~evaluate``, append the row to the results
-file. A plan that was interrupted resumes after the last run with a row.
+base's, ``base_battery_topic``, recorded beside it as ``b_base``), both from the decision's profile on (its cost is
+the task's: :mod:`cnr_mission.core.task`), ``~evaluate``, append the row to the results file. A plan that was
+interrupted resumes after the last run with a row.
 
 Exit status: 0 every run done, 2 bad configuration, 1 anything else.
 """
 from __future__ import annotations
 
+import collections
 import math
 import os
 import time
-from typing import Dict, List, Optional
+from typing import Deque, Dict, List, Optional, Tuple
 
 import actionlib
 from actionlib.action_client import CommState
@@ -27,8 +29,8 @@ from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
 from sensor_msgs.msg import BatteryState
 
 import cnr_params
-from cnr_mission.core.task import (GAVE_UP, SUCCEEDED, TOO_LONG, RunSpec, append_result, battery_fields, evaluable,
-                                   load_plan, load_task, mission_status, read_results, resolve_force)
+from cnr_mission.core.task import (GAVE_UP, SUCCEEDED, TOO_LONG, RunSpec, append_result, battery_fields, charge_at,
+                                   evaluable, load_plan, load_task, mission_status, read_results, resolve_force)
 from cnr_msgs.msg import TaskDecision
 from cnr_msgs.srv import Decide, EvaluateTask, Teleport
 from cnr_navigation.goal_sequencer import wait_for_server
@@ -40,10 +42,7 @@ from network_monitor.decider_codes import FORCE, MISSION_STATUS, PLACEMENT_WORD,
 
 FAILED_STATES = (GoalStatus.ABORTED, GoalStatus.REJECTED, GoalStatus.LOST, GoalStatus.RECALLED,
                  GoalStatus.PREEMPTED)
-
-
-def _percentage(msg: Optional[BatteryState]) -> Optional[float]:
-    return None if msg is None else msg.percentage
+READINGS_KEPT = 3600        # a pack's readings kept (an hour at the simulator's 1 Hz): more than a task takes
 
 
 class TaskRunner:
@@ -69,8 +68,10 @@ class TaskRunner:
         self.client = actionlib.SimpleActionClient(action, MoveBaseAction)
         self.last_status = time.monotonic()         # wall time move_base's action status was last heard
         rospy.Subscriber(f'{action}/status', GoalStatusArray, self._on_status, queue_size=2)
-        self.battery: Optional[BatteryState] = None          # the robot computer's pack: B_task
-        self.base_battery: Optional[BatteryState] = None     # the base's pack: b_base
+        self.battery_wait = p.number('battery_wait', positive=True)
+        # each pack's readings (sim time, percentage): the robot computer's (B_task) and the base's (b_base)
+        self.battery: Deque[Tuple[float, float]] = collections.deque(maxlen=READINGS_KEPT)
+        self.base_battery: Deque[Tuple[float, float]] = collections.deque(maxlen=READINGS_KEPT)
         self.link = None                            # the link the previous run set
         self.redecisions: List[TaskDecision] = []
         rospy.Subscriber(p.string('battery_topic'), BatteryState, self._on_battery, queue_size=2)
@@ -81,10 +82,18 @@ class TaskRunner:
         self.last_status = time.monotonic()
 
     def _on_battery(self, msg: BatteryState) -> None:
-        self.battery = msg
+        self.battery.append((rospy.Time.now().to_sec(), msg.percentage))
 
     def _on_base_battery(self, msg: BatteryState) -> None:
-        self.base_battery = msg
+        self.base_battery.append((rospy.Time.now().to_sec(), msg.percentage))
+
+    def _readings_after(self, t: float) -> None:
+        """Wait (at most battery_wait s, wall) for a reading of each pack after sim time ``t``: a percentage at
+        ``t`` is read between the readings around it."""
+        deadline = time.monotonic() + self.battery_wait
+        while not rospy.is_shutdown() and time.monotonic() < deadline and \
+                not all(r and r[-1][0] > t for r in (self.battery, self.base_battery)):
+            time.sleep(0.05)
 
     def _on_decision(self, msg: TaskDecision) -> None:
         if msg.event == TaskDecision.REDECIDED:
@@ -176,28 +185,34 @@ class TaskRunner:
         if not res.success:
             raise RuntimeError(f'could not put the robot at the start ({sx}, {sy}): {res.message}')
         self.redecisions = []
+        t_decision = decided_at = 0.0      # s: the decision's profile and placement (wall), sim time it ended
         if r.decide:
             self.decide.wait_for_service(self.decide_timeout)
             d = self.decide(task=self.plan.task, location=self.plan.location, force=FORCE[force], probe=True,
                             explore=r.explore, settle=settle, reuse_profile=r.reuse_profile)
             if not d.ok:
                 raise RuntimeError(f'the decider refused: {d.message}')
+            decided_at = rospy.Time.now().to_sec()
             self.say(f'decision: {d.message}')
             m = d.decision
+            t_decision = m.profile_time + m.placing_time
             self.decided[r.condition] = PLACEMENT_WORD[m.decision]
             row.update(decision=PLACEMENT_WORD[m.decision], reason=REASON_WORD[m.reason],
                        policy=PLACEMENT_WORD[m.policy], confidence=m.confidence, votes_offload=m.votes_offload,
                        c_l=m.c_l, r_bw=m.r_bw, profile_method=A_BW_METHOD_WORD[m.profile_method], placed=m.placed,
-                       placing_time=m.placing_time, placement=m.placement)
+                       placing_time=m.placing_time, placement=m.placement, t_decision=t_decision)
         if not wait_for_server(self.client, self.decide_timeout):
             raise RuntimeError('move_base\'s action server is not there')
-        b0, base0 = self.battery, self.base_battery
         t0 = rospy.Time.now().to_sec()
         outcomes = self.drive()
-        t_task = rospy.Time.now().to_sec() - t0
-        b1, base1 = self.battery, self.base_battery
+        t1 = rospy.Time.now().to_sec()
+        t_task = t1 - t0 + t_decision
+        self._readings_after(t1)
+        comp, base = list(self.battery), list(self.base_battery)
         status = mission_status(outcomes, len(self.spec.goals))
-        batteries = battery_fields((_percentage(b0), _percentage(b1)), (_percentage(base0), _percentage(base1)))
+        batteries = battery_fields((charge_at(comp, t0), charge_at(comp, t1)),
+                                   (charge_at(base, t0), charge_at(base, t1)), decided=r.decide,
+                                   at_decision=charge_at(comp, decided_at - t_decision) if r.decide else None)
         b_task = batteries['b_task']
         row.update(mission_status=status, t_task=t_task, redecisions=len(self.redecisions), **batteries)
         if r.decide and not evaluable(b_task):

@@ -172,15 +172,16 @@ class DeciderNode:
         out.header.stamp = rospy.Time.now()
         return out
 
-    def _profile(self, req) -> Tuple[Profile, str]:
-        """The profile a ~decide decides on, and a note for its message (the package README, "Node
+    def _profile(self, req) -> Tuple[Profile, str, float]:
+        """The profile a ~decide decides on, a note for its message and the profile's own time (s, wall: the
+        network monitor's ``~profile_now``, its probe included; 0 when reused) (the package README, "Node
         migration_decider"): the previous one (``reuse_profile``), or a new one taken with the task's modules on
         the robot (``decider.profile_at_home``) no earlier than ``settle`` s after the request or, when modules
         were brought home, after they were (their traffic filled the link's queue until then), or after the
         network monitor began to hear the cloud (:meth:`_settle`)."""
         if req.reuse_profile and self.last_profile is not None:
             profile, note = self.last_profile
-            return profile, note + 'the previous profile: '
+            return profile, note + 'the previous profile: ', 0.0
         t0 = time.monotonic()
         home_note, note = '', ''
         if self.profile_at_home and req.task in self.cfg.tasks:
@@ -194,6 +195,7 @@ class DeciderNode:
                 if not placed:
                     rospy.logwarn(f'migration_decider: {home_note}')
         note += self._settle(t0, req.settle)
+        started = time.monotonic()
         try:
             res = self.profile_now(req.probe) if self._wait(self.profile_now) else None
         except (rospy.ServiceException, rospy.ROSException) as exc:
@@ -206,7 +208,7 @@ class DeciderNode:
             profile = profile_of(res.profile)
             note += '' if res.success else f'probe failed ({res.message}): '
         self.last_profile = (profile, note)
-        return profile, home_note + note
+        return profile, home_note + note, time.monotonic() - started
 
     def _settle(self, t0: float, settle: float) -> str:
         """Wait until ``settle`` s after ``t0`` *and* after the network monitor's periodic profiles began to say
@@ -236,7 +238,7 @@ class DeciderNode:
 
     @quiet_at_shutdown
     def _on_decide(self, req) -> DecideResponse:
-        profile, note = self._profile(req)
+        profile, note, profile_time = self._profile(req)
         with self.lock:
             try:
                 d, hosts, warnings = self.advisor.begin(req.task, req.location, profile, time.monotonic(),
@@ -256,6 +258,7 @@ class DeciderNode:
                                                     'the modules are split, the run is not learned'))
         out = self._message('decided', req.task, req.location, d.decision, d, profile, now)
         out.placed, out.placing_time, out.migrations = placed, time.monotonic() - t0, moved
+        out.profile_time = profile_time
         why = {'knn': f'k-NN {d.votes.get(d.decision, 0)} of {self.cfg.decision.k} votes',
                'cold_start': 'cold-start rule', 'explore': f'exploration (policy: {d.policy})',
                'no_profile': 'no usable profile: the robot', 'forced': 'forced'}.get(d.reason, d.reason)

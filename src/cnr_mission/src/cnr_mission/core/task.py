@@ -22,11 +22,16 @@ e.g. the second run of a pair under the same link). Results are appended to a TS
 so a plan that was interrupted resumes after its last finished run (:func:`read_results`).
 
 B_task is the robot computer's battery (the netbook's pack, as the thesis read BAT0); ``b_base`` beside it in a
-row is the same fraction of the Kobuki base's pack (recorded, never evaluated). A results file without the
-``b_base`` column (:data:`RESULT_COLUMNS_ONE_PACK`) is read and appended to in its own columns.
+row is the same fraction of the Kobuki base's pack over the drive (recorded, never evaluated). A decided run's
+T_task and B_task count the decision's own cost too, as a robot that decides pays it: its profile (the probe
+included) and the placement, from the profile's start to the decision (``t_decision``, ``b_decision`` in the row,
+the part of T_task and B_task they were). Each pack's percentage at an instant is read between its two readings
+around it (:func:`charge_at`; the simulator publishes them at 1 Hz). A results file without the later columns
+(:data:`LATER_COLUMNS`; e.g. :data:`RESULT_COLUMNS_ONE_PACK`) is read and appended to in its own columns.
 """
 from __future__ import annotations
 
+import bisect
 import math
 import os
 from dataclasses import dataclass
@@ -91,10 +96,28 @@ def battery_used(percentage_before: Optional[float], percentage_after: Optional[
 
 
 def battery_fields(computer: Tuple[Optional[float], Optional[float]],
-                   base: Tuple[Optional[float], Optional[float]]) -> Dict[str, float]:
-    """A run's battery columns from the percentages (before, after) of each pack: ``b_task`` (Eq. 4-5) the robot
-    computer's, ``b_base`` the base's (:func:`battery_used`)."""
-    return dict(b_task=battery_used(*computer), b_base=battery_used(*base))
+                   base: Tuple[Optional[float], Optional[float]], decided: bool = False,
+                   at_decision: Optional[float] = None) -> Dict[str, float]:
+    """A run's battery columns from the percentages (before, after) of each pack over the drive: ``b_task``
+    (Eq. 4-5) the robot computer's, ``b_base`` the base's (:func:`battery_used`). A ``decided`` run's ``b_task``
+    counts from ``at_decision``, the computer's percentage when the decision's profile began, and ``b_decision`` is
+    that part (module docstring); NaN without that reading."""
+    fields = dict(b_task=battery_used(*computer), b_base=battery_used(*base))
+    if decided:
+        fields.update(b_task=battery_used(at_decision, computer[1]), b_decision=battery_used(at_decision, computer[0]))
+    return fields
+
+
+def charge_at(readings: Sequence[Tuple[float, float]], t: float) -> Optional[float]:
+    """A pack's percentage at time ``t`` from its readings (time, percentage), in time order: linear between the
+    two around ``t``; the last one's after it (the next has not come); None before the first (no reading yet)."""
+    i = bisect.bisect_right([r[0] for r in readings], t)
+    if i == 0:
+        return None
+    if i == len(readings):
+        return readings[-1][1]
+    (ta, pa), (tb, pb) = readings[i - 1], readings[i]
+    return pa if tb <= ta else pa + (pb - pa) * (t - ta) / (tb - ta)
 
 
 def evaluable(b_task: float) -> bool:
@@ -166,17 +189,19 @@ def load_plan(path: str) -> Plan:
 
 RESULT_COLUMNS = ('id', 'condition', 'rtt_ms', 'rate_mbit', 'loss', 'force', 'decision', 'reason', 'policy',
                   'confidence', 'votes_offload', 'c_l', 'r_bw', 'profile_method', 'placed', 'placing_time',
-                  'redecisions', 'placement', 'mission_status', 't_task', 'b_task', 'b_base', 'value', 'good',
-                  'label', 'learned', 'wall_start', 'wall_time')
-#: the columns of a results file that records one battery pack (no ``b_base``): read with ``b_base`` '',
-#: appended to in these columns
-RESULT_COLUMNS_ONE_PACK = tuple(c for c in RESULT_COLUMNS if c != 'b_base')
+                  'redecisions', 'placement', 'mission_status', 't_task', 'b_task', 'b_base', 't_decision',
+                  'b_decision', 'value', 'good', 'label', 'learned', 'wall_start', 'wall_time')
+#: columns a results file made before them lacks: read as '', appended to in the file's own columns
+LATER_COLUMNS = ('b_base', 't_decision', 'b_decision')
+#: the columns of a results file that records one battery pack and the task alone
+RESULT_COLUMNS_ONE_PACK = tuple(c for c in RESULT_COLUMNS if c not in LATER_COLUMNS)
 
 
 def _columns(path: str, header: str) -> Tuple[str, ...]:
-    """The columns a results file's header line names (ConfigError if it is not a results file's)."""
+    """The columns a results file's header line names (ConfigError if it is not a results file's):
+    :data:`RESULT_COLUMNS`, or those less some of :data:`LATER_COLUMNS`."""
     columns = tuple(header.rstrip('\n').split('\t'))
-    if columns not in (RESULT_COLUMNS, RESULT_COLUMNS_ONE_PACK):
+    if columns != tuple(c for c in RESULT_COLUMNS if c in columns or c not in LATER_COLUMNS):
         raise ConfigError(path, 'header', 'not a task results file (unexpected header)')
     return columns
 
