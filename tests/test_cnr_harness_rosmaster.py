@@ -62,3 +62,46 @@ def test_after_join_all_nothing_is_queued():
     pool = NodeDispatcher(3)
     pool.join_all(wait_for_tasks=False, wait_for_threads=False)
     assert pool.queue_task('n', print, ('x',)) is False and pool.pending() == 0
+
+
+def test_a_multicall_s_notifications_start_once_it_is_answered_and_only_the_newest_list_per_topic_is_sent():
+    from cnr_harness.rosmaster import hold_during_multicall, publisher_update_task
+    pool = NodeDispatcher(3, hang_after=0.2)
+    assert pool._superseded is publisher_update_task() is not None   # rosmaster's publisherUpdate task
+    sent = []
+    pool._superseded = sent_update = lambda api, topic, pubs: sent.append((api, topic, pubs))   # records instead
+
+    def multicall(_server, calls):                          # stands for SimpleXMLRPCDispatcher.system_multicall
+        for api, topic, pubs in calls:                      # one registration each: its subscribers notified
+            pool.queue_task(api, sent_update, (api, topic, pubs))
+        assert sent == [] and pool.get_thread_count() == 0  # nothing sent while the multicall runs
+        return ['ok'] * len(calls)
+    calls = [('http://robot:1/', '/scan', ['a']), ('http://robot:2/', '/scan', ['a']),
+             ('http://robot:1/', '/scan', ['a', 'b']), ('http://robot:1/', '/odom', ['c']),
+             ('http://robot:1/', '/scan', ['a', 'b', 'd'])]
+    assert hold_during_multicall(multicall)(None, calls) == ['ok'] * 5
+    wait_until(lambda: pool.pending() == 0, 5.0, 'the held notifications')
+    # robot:1 hears of /scan once, with the newest list, before /odom (its order); robot:2 once
+    assert [x for x in sent if x[0] == 'http://robot:1/'] == [('http://robot:1/', '/scan', ['a', 'b', 'd']),
+                                                             ('http://robot:1/', '/odom', ['c'])]
+    assert [x for x in sent if x[0] == 'http://robot:2/'] == [('http://robot:2/', '/scan', ['a'])]
+
+
+def test_a_running_notification_is_not_superseded_and_other_tasks_never_are():
+    pool = NodeDispatcher(3, hang_after=5.0)
+    gate, sent = threading.Event(), []
+
+    def update(api, topic, pubs):
+        gate.wait(5)
+        sent.append(pubs)
+    pool._superseded = update
+    pool.queue_task('n', update, ('n', '/t', ['a']))         # running (waits at the gate)
+    wait_until(lambda: pool.pending() == 1, 2.0, 'the first update to start')
+    pool.queue_task('n', update, ('n', '/t', ['a', 'b']))
+    pool.queue_task('n', update, ('n', '/t', ['a', 'b', 'c']))   # supersedes the queued one, not the running one
+    pool.queue_task('n', sent.append, ('other',))
+    pool.queue_task('n', sent.append, ('other',))            # not a publisher update: both run
+    gate.set()
+    wait_until(lambda: pool.pending() == 0, 5.0, 'the updates')
+    assert sent == [['a'], ['a', 'b', 'c'], 'other', 'other']
+

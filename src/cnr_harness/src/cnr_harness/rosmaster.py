@@ -18,6 +18,13 @@ notification running at the same time slowed the master's answers to the bridge 
 URI) run in order, in a thread that exists while that node has work; at most ``threads`` calls run at once, as in
 rosmaster's pool, but a call that has not returned within ``hang_after`` seconds stops counting (it waits on a dead
 link or a hung node), so it never holds up another node's; no thread polls.
+
+Two more, for a burst of registrations such as a peer's after an outage (the bridge sends them in one
+``system.multicall``): the notifications the calls of a multicall set off are held until the multicall has been
+answered (the answer no longer competes with them for the interpreter and a capped CPU), and a queued
+``publisherUpdate`` that a newer one for the same node and topic supersedes is dropped (each carries the topic's
+whole list of publishers, so only the newest counts): a peer's 30 publishers on 20 topics notify each subscriber once
+per topic, not once per publisher.
 """
 from __future__ import annotations
 
@@ -27,11 +34,23 @@ import threading
 import time
 import traceback
 from collections import deque
-from typing import Any, Callable, Deque, Dict, List, Optional, Tuple
+from typing import Any, Callable, Deque, Dict, List, Optional, Set, Tuple
 
-Task = Tuple[Callable[..., Any], tuple, Optional[Callable[[Any], None]]]
+Task = List[Any]         # [function, args, callback]: args replaced in place when a newer notification supersedes it
 HANG_AFTER = 0.25       # s a notification call may take before it stops counting against the pool's size (one
                         # across a dead link never returns; a slow local one only lets one more call run)
+
+
+_batch = threading.local()      # .held: (dispatcher, marker) whose drain waits for the current multicall's answer
+
+
+def publisher_update_task() -> Optional[Callable[..., Any]]:
+    """rosmaster's ``publisherUpdate`` task (args: node API, topic, the topic's publishers), None without rosmaster."""
+    try:
+        from rosmaster.master_api import publisher_update_task as task
+    except ImportError:
+        return None
+    return task
 
 
 class NodeDispatcher:
@@ -42,6 +61,8 @@ class NodeDispatcher:
     def __init__(self, threads: int, hang_after: float = HANG_AFTER) -> None:
         self._lock = threading.Lock()
         self._queues: Dict[Any, Deque[Task]] = {}
+        self._draining: Set[Any] = set()            # markers whose thread is running
+        self._superseded = publisher_update_task()
         self._joining = False
         self.hang_after = hang_after
         self._slots = threading.Condition()         # guards the two below
@@ -54,14 +75,45 @@ class NodeDispatcher:
         if self._joining or not callable(task):
             return False
         key = marker if marker is not None else object()       # no marker: no order to keep
+        args = tuple(args or ())
+        held = getattr(_batch, 'held', None)
         with self._lock:
-            queue = self._queues.get(key)
-            if queue is not None:                               # its thread is draining it
-                queue.append((task, tuple(args or ()), taskCallback))
+            queue = self._queues.setdefault(key, deque())
+            if not self._supersede(queue, task, args, taskCallback):
+                queue.append([task, args, taskCallback])
+            if key in self._draining:                           # its thread takes it
                 return True
-            self._queues[key] = deque([(task, tuple(args or ()), taskCallback)])
-        threading.Thread(target=self._drain, args=(key,), name='master-notify', daemon=True).start()
+            if held is not None:                                # started once the multicall is answered
+                held.append((self, key))
+                return True
+            self._draining.add(key)
+        self._start(key)
         return True
+
+    def _supersede(self, queue: Deque[Task], task: Callable[..., Any], args: tuple,
+                   callback: Optional[Callable[[Any], None]]) -> bool:
+        """A queued publisherUpdate of the same node and topic takes the newer list instead (module docstring)."""
+        if task is not self._superseded or callback is not None or len(args) != 3:
+            return False
+        for queued in queue:
+            if queued[0] is task and queued[2] is None and queued[1][:2] == args[:2]:
+                queued[1] = args
+                return True
+        return False
+
+    def _start(self, key: Any) -> None:
+        threading.Thread(target=self._drain, args=(key,), name='master-notify', daemon=True).start()
+
+    def release(self, keys: List[Any]) -> None:
+        """Start draining the queues held during a multicall."""
+        start = []
+        with self._lock:
+            for key in dict.fromkeys(keys):
+                if key not in self._draining and self._queues.get(key):
+                    self._draining.add(key)
+                    start.append(key)
+        for key in start:
+            self._start(key)
 
     def _drain(self, key: Any) -> None:
         while True:
@@ -69,6 +121,7 @@ class NodeDispatcher:
                 queue = self._queues[key]
                 if not queue or self._joining:
                     del self._queues[key]
+                    self._draining.discard(key)
                     return
                 task, args, callback = queue.popleft()
             call = self._start_call()
@@ -104,9 +157,9 @@ class NodeDispatcher:
                 self._slots.notify()
 
     def pending(self) -> int:
-        """Tasks queued or running (for tests)."""
+        """Tasks queued, and queues being drained (for tests)."""
         with self._lock:
-            return sum(len(q) for q in self._queues.values()) + len(self._queues)
+            return sum(len(q) for q in self._queues.values()) + len(self._draining)
 
     def join_all(self, wait_for_tasks: bool = True, wait_for_threads: bool = True) -> None:
         """At shutdown: no new tasks; queued ones are dropped (the master is going away)."""
@@ -117,14 +170,37 @@ class NodeDispatcher:
 
     def get_thread_count(self) -> int:
         with self._lock:
-            return len(self._queues)
+            return len(self._draining)
+
+
+def hold_during_multicall(multicall: Callable[[Any, list], list]) -> Callable[[Any, list], list]:
+    """``SimpleXMLRPCDispatcher.system_multicall`` that holds the notifications its calls set off until it returns
+    (module docstring)."""
+    def system_multicall(server: Any, call_list: list) -> list:
+        outer = getattr(_batch, 'held', None)
+        _batch.held = held = [] if outer is None else outer
+        try:
+            return multicall(server, call_list)
+        finally:
+            if outer is None:
+                _batch.held = None
+                by_dispatcher: Dict[int, Tuple[NodeDispatcher, List[Any]]] = {}
+                for dispatcher, key in held:
+                    by_dispatcher.setdefault(id(dispatcher), (dispatcher, []))[1].append(key)
+                for dispatcher, keys in by_dispatcher.values():
+                    dispatcher.release(keys)
+    system_multicall.__doc__ = multicall.__doc__
+    return system_multicall
 
 
 def main(argv: Optional[List[str]] = None) -> None:
     import rosmaster.main
     import rosmaster.threadpool
+    args = sys.argv[1:] if argv is None else argv
     rosmaster.threadpool.MarkedThreadPool = NodeDispatcher     # master_api looks it up when the master starts
-    rosmaster.main.rosmaster_main(['rosmaster', *(sys.argv[1:] if argv is None else argv)])
+    from xmlrpc.server import SimpleXMLRPCDispatcher            # bound by register_multicall_functions at start
+    SimpleXMLRPCDispatcher.system_multicall = hold_during_multicall(SimpleXMLRPCDispatcher.system_multicall)
+    rosmaster.main.rosmaster_main(['rosmaster', *args])
 
 
 if __name__ == '__main__':
