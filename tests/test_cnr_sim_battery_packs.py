@@ -141,7 +141,7 @@ def test_task_b_task_is_the_computer_pack_and_b_base_the_base_pack():
     assert runner['base_battery_topic'] == '/' + cfg.base_pack.topic
 
 
-def test_a_decided_runs_b_task_counts_the_decision_and_a_pack_is_read_between_readings():
+def test_a_decided_runs_b_task_counts_its_placement_and_a_pack_is_read_between_readings():
     from cnr_mission.core.task import battery_fields, charge_at
     readings = [(10.0, 0.90), (11.0, 0.89), (12.0, 0.88)]
     assert charge_at(readings, 9.5) is None                           # before the first reading: unknown
@@ -149,10 +149,11 @@ def test_a_decided_runs_b_task_counts_the_decision_and_a_pack_is_read_between_re
     assert charge_at(readings, 10.25) == pytest.approx(0.8975)        # between the two around it
     assert charge_at(readings, 12.7) == pytest.approx(0.88)           # after the last: the last
     assert charge_at([(5.0, 0.5), (5.0, 0.4)], 5.0) == pytest.approx(0.4)
-    fields = battery_fields(computer=(0.89, 0.80), base=(0.7, 0.69), decided=True, at_decision=0.8975)
-    assert fields['b_task'] == pytest.approx(0.0975) and fields['b_decision'] == pytest.approx(0.0075)
+    fields = battery_fields(computer=(0.89, 0.80), base=(0.7, 0.69), decided=True, at_placing=0.895,
+                            at_profile=0.8975)
+    assert fields['b_task'] == pytest.approx(0.095) and fields['b_decision'] == pytest.approx(0.0075)
     assert fields['b_base'] == pytest.approx(0.01)                    # the base's: the drive alone
-    no_reading = battery_fields(computer=(0.89, 0.80), base=(0.7, 0.69), decided=True, at_decision=None)
+    no_reading = battery_fields(computer=(0.89, 0.80), base=(0.7, 0.69), decided=True, at_placing=None)
     assert no_reading['b_task'] != no_reading['b_task']               # NaN: the run is invalid
     assert 'b_decision' not in battery_fields(computer=(0.89, 0.80), base=(0.7, 0.69))   # a control run
 

@@ -104,12 +104,11 @@ def test_a_good_link_offloads_and_a_bad_one_onloads_by_knn(tmp_path):
     assert len(learned) == 18 and [r.decision for r in learned[15:]] == [OFFLOAD, ONLOAD, OFFLOAD]
     # B_task from the simulated battery: a few thousandths of a full battery (thesis CB 0.0046 for 88 s)
     assert all(0.0005 < float(r['b_task']) < 0.02 for r in rows[:2]), rows
-    # a decision's cost is the task's: its profile (an active probe) and placement, inside T_task and B_task;
-    # the paired run reused the profile, so its decision cost only the placement
+    # the decision's cost beside the task's: its profile (an active probe) and placement; the paired run reused the
+    # profile, so its decision cost only the placement, which T_task counts (offloading started a cloud move_base)
     for r in rows:
         assert float(r['t_decision']) >= float(r['placing_time']) >= 0, r
-        assert 0 < float(r['t_decision']) < float(r['t_task']), r
-        assert 0.0 < float(r['b_decision']) < float(r['b_task']), r
+        assert 0 < float(r['t_decision']) < float(r['t_task']) and 0.0 < float(r['b_decision']) < 0.02, r
     assert float(good['t_decision']) > float(good['placing_time'])         # the probe took its time too
     assert float(paired['t_decision']) == pytest.approx(float(paired['placing_time']))
     # each managed instance's log is kept with the session's report (not in a directory every run shares)

@@ -372,11 +372,11 @@ def time_budget(a: Analysis) -> str:
               f'(task {med_of(on, "t_task")} s), offload run {med_of(off, "wall_time")} s (task '
               f'{med_of(off, "t_task")} s, placing {med_of(off, "placing_time")} s).')
     decided = [r for r in a.all_rows if r.get('t_decision')]
-    budget += (f' A decided run\'s task time counts its decision (profile and placing: median '
-               f'{med_of(decided, "t_decision")} s, battery '
-               f'{_fmt(_median([core.number(r, "b_decision") for r in decided]), 6)}), as a robot that decides '
-               f'pays it.' if decided else ' The task times are the drives alone (these runs did not record the '
-               f'decision\'s own cost).')
+    budget += (f' A decided run\'s task time and battery count its placement; the whole decision (profile and '
+               f'placing, either placement pays the profile) took a median {med_of(decided, "t_decision")} s and '
+               f'{_fmt(_median([core.number(r, "b_decision") for r in decided]), 6)} of the battery.' if decided
+               else ' The task times are the drives alone (these runs did not record the placement\'s cost in '
+               f'them).')
     elapsed = core.elapsed_time(a.all_rows)               # every condition run, left out or not
     n_run = len({r['condition'] for r in a.all_rows})
     if n_run and elapsed > 0:

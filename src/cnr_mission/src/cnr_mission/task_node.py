@@ -6,9 +6,9 @@ Per run: set the link (testbed emulator), put the robot at the task's start (the
 ``~decide`` (the modules home, the network monitor's window filled with the new link for ``settle`` s, profile,
 k-NN, placement; or the previous run's profile with ``reuse_profile``), drive the goals with
 move_base's action, measure T_task (sim time) and B_task (the robot computer's battery, ``battery_topic``; the
-base's, ``base_battery_topic``, recorded beside it as ``b_base``), both from the decision's profile on (its cost is
-the task's: :mod:`cnr_mission.core.task`), ``~evaluate``, append the row to the results file. A plan that was
-interrupted resumes after the last run with a row.
+base's, ``base_battery_topic``, recorded beside it as ``b_base``), both from the placement on (its cost is the
+task's; the whole decision's, profile and placement, beside them: :mod:`cnr_mission.core.task`), ``~evaluate``,
+append the row to the results file. A plan that was interrupted resumes after the last run with a row.
 
 Exit status: 0 every run done, 2 bad configuration, 1 anything else.
 """
@@ -185,7 +185,8 @@ class TaskRunner:
         if not res.success:
             raise RuntimeError(f'could not put the robot at the start ({sx}, {sy}): {res.message}')
         self.redecisions = []
-        t_decision = decided_at = 0.0      # s: the decision's profile and placement (wall), sim time it ended
+        placing = t_decision = decided_at = 0.0    # s: the placement, the decision (profile + placement; wall), and
+        #                                             the sim time it ended
         if r.decide:
             self.decide.wait_for_service(self.decide_timeout)
             d = self.decide(task=self.plan.task, location=self.plan.location, force=FORCE[force], probe=True,
@@ -195,7 +196,7 @@ class TaskRunner:
             decided_at = rospy.Time.now().to_sec()
             self.say(f'decision: {d.message}')
             m = d.decision
-            t_decision = m.profile_time + m.placing_time
+            placing, t_decision = m.placing_time, m.profile_time + m.placing_time
             self.decided[r.condition] = PLACEMENT_WORD[m.decision]
             row.update(decision=PLACEMENT_WORD[m.decision], reason=REASON_WORD[m.reason],
                        policy=PLACEMENT_WORD[m.policy], confidence=m.confidence, votes_offload=m.votes_offload,
@@ -206,13 +207,14 @@ class TaskRunner:
         t0 = rospy.Time.now().to_sec()
         outcomes = self.drive()
         t1 = rospy.Time.now().to_sec()
-        t_task = t1 - t0 + t_decision
+        t_task = t1 - t0 + placing
         self._readings_after(t1)
         comp, base = list(self.battery), list(self.base_battery)
         status = mission_status(outcomes, len(self.spec.goals))
         batteries = battery_fields((charge_at(comp, t0), charge_at(comp, t1)),
                                    (charge_at(base, t0), charge_at(base, t1)), decided=r.decide,
-                                   at_decision=charge_at(comp, decided_at - t_decision) if r.decide else None)
+                                   at_placing=charge_at(comp, decided_at - placing) if r.decide else None,
+                                   at_profile=charge_at(comp, decided_at - t_decision) if r.decide else None)
         b_task = batteries['b_task']
         row.update(mission_status=status, t_task=t_task, redecisions=len(self.redecisions), **batteries)
         if r.decide and not evaluable(b_task):

@@ -23,10 +23,10 @@ so a plan that was interrupted resumes after its last finished run (:func:`read_
 
 B_task is the robot computer's battery (the netbook's pack, as the thesis read BAT0); ``b_base`` beside it in a
 row is the same fraction of the Kobuki base's pack over the drive (recorded, never evaluated). A decided run's
-T_task and B_task count the decision's own cost too, as a robot that decides pays it: its profile (the probe
-included) and the placement, from the profile's start to the decision (``t_decision``, ``b_decision`` in the row,
-the part of T_task and B_task they were). Each pack's percentage at an instant is read between its two readings
-around it (:func:`charge_at`; the simulator publishes them at 1 Hz). A results file without the later columns
+T_task and B_task count its placement too (a migration before the drive is part of running there: Eq. 4-5 and
+the label weigh it); ``t_decision`` and ``b_decision`` in the row are the whole decision's cost, its profile (the
+probe included; the same for either placement) and the placement. Each pack's percentage at an instant is read
+between its two readings around it (:func:`charge_at`; the simulator publishes them at 1 Hz). A results file without the later columns
 (:data:`LATER_COLUMNS`; e.g. :data:`RESULT_COLUMNS_ONE_PACK`) is read and appended to in its own columns.
 """
 from __future__ import annotations
@@ -97,14 +97,15 @@ def battery_used(percentage_before: Optional[float], percentage_after: Optional[
 
 def battery_fields(computer: Tuple[Optional[float], Optional[float]],
                    base: Tuple[Optional[float], Optional[float]], decided: bool = False,
-                   at_decision: Optional[float] = None) -> Dict[str, float]:
+                   at_placing: Optional[float] = None, at_profile: Optional[float] = None) -> Dict[str, float]:
     """A run's battery columns from the percentages (before, after) of each pack over the drive: ``b_task``
     (Eq. 4-5) the robot computer's, ``b_base`` the base's (:func:`battery_used`). A ``decided`` run's ``b_task``
-    counts from ``at_decision``, the computer's percentage when the decision's profile began, and ``b_decision`` is
-    that part (module docstring); NaN without that reading."""
+    counts from ``at_placing``, the computer's percentage when the placement began, and ``b_decision`` is the
+    computer's from ``at_profile``, when the decision's profile began, to the drive (module docstring); NaN without
+    a reading."""
     fields = dict(b_task=battery_used(*computer), b_base=battery_used(*base))
     if decided:
-        fields.update(b_task=battery_used(at_decision, computer[1]), b_decision=battery_used(at_decision, computer[0]))
+        fields.update(b_task=battery_used(at_placing, computer[1]), b_decision=battery_used(at_profile, computer[0]))
     return fields
 
 
