@@ -123,7 +123,7 @@ def test_standstill_keeps_the_longest_interval_and_its_start():
     assert not st.open and st.total == pytest.approx(3.5)
 
 
-def test_a_source_that_ends_its_search_gets_the_timeout_from_then_and_a_live_one_stops_the_chain(params):
+def test_a_source_that_ends_its_search_gets_the_timeout_from_then_and_only_its_goal_stops_the_chain(params):
     s = Standin(params, own)
     s.path.source_mode(0.0, 'SEARCH')
     t = feed(s, 0.0, 1.0, [('/mfg-1-0.0', ACTIVE)])
@@ -134,4 +134,11 @@ def test_a_source_that_ends_its_search_gets_the_timeout_from_then_and_a_live_one
     s.sent()
     t = feed(s, t, t + 3.0, [('/goal_standin-1-9.5', ACTIVE)])
     t = feed(s, t, t + 0.4, [('/goal_standin-1-9.5', SUCCEEDED)])
-    assert s.path.alive(t) and not s.due(t)                   # a live source: no chain, the timeout again
+    # the source is heard but its goal has not come (after an outage its registrations may still be restored on the
+    # robot's master): the chain goes on, no second timeout of standing still
+    assert s.path.alive(t) and s.due(t)
+    s.sent()
+    t = feed(s, t, t + 0.5, [('/goal_standin-2-9.9', ACTIVE), ('/mfg-2-10.0', ACTIVE)])
+    assert s.handed_back() and not s.standing_in             # the source's goal is pursued: handed back
+    t = feed(s, t, t + 0.4, [('/mfg-2-10.0', SUCCEEDED)])
+    assert not s.due(t) and s.due(t + params.timeout)         # from now on the timeout again

@@ -319,13 +319,14 @@ class Standin:
         return False
 
     def due(self, now: float) -> bool:
-        """Send a goal now? After ``timeout`` of standing still; at once after its own goal while the source
-        stays silent (a patrol of its own, no pause between its goals)."""
+        """Send a goal now? After ``timeout`` of standing still; at once after its own goal until a goal of the
+        source is pursued again (a patrol of its own, no pause between its goals): a source heard again after an
+        outage may not reach move_base yet (its registrations on the robot's master are being restored), and the
+        robot would otherwise stand another ``timeout`` waiting for it."""
         since = self.path.standing_since(now)
         if since is None:
             return False
-        chained = self.standing_in and not self.path.alive(now)
-        return chained or now - since >= self.p.timeout
+        return self.standing_in or now - since >= self.p.timeout
 
     def sent(self) -> None:
         self.standing_in = True
