@@ -34,7 +34,7 @@ import threading
 import time
 import traceback
 from collections import deque
-from typing import Any, Callable, Deque, Dict, List, Optional, Set, Tuple
+from typing import Any, Callable, Deque, Dict, List, Optional, Set
 
 Task = List[Any]         # [function, args, callback]: args replaced in place when a newer notification supersedes it
 HANG_AFTER = 0.25       # s a notification call may take before it stops counting against the pool's size (one
@@ -184,10 +184,10 @@ def hold_during_multicall(multicall: Callable[[Any, list], list]) -> Callable[[A
         finally:
             if outer is None:
                 _batch.held = None
-                by_dispatcher: Dict[int, Tuple[NodeDispatcher, List[Any]]] = {}
+                by_dispatcher: Dict[NodeDispatcher, List[Any]] = {}
                 for dispatcher, key in held:
-                    by_dispatcher.setdefault(id(dispatcher), (dispatcher, []))[1].append(key)
-                for dispatcher, keys in by_dispatcher.values():
+                    by_dispatcher.setdefault(dispatcher, []).append(key)
+                for dispatcher, keys in by_dispatcher.items():
                     dispatcher.release(keys)
     system_multicall.__doc__ = multicall.__doc__
     return system_multicall

@@ -185,8 +185,8 @@ class TaskRunner:
         if not res.success:
             raise RuntimeError(f'could not put the robot at the start ({sx}, {sy}): {res.message}')
         self.redecisions = []
-        placing = t_decision = decided_at = 0.0    # s: the placement, the decision (profile + placement; wall), and
-        #                                             the sim time it ended
+        # s: the placement and the whole decision (profile + placement; wall), and the sim time the decision ended
+        placing = t_decision = decided_at = 0.0
         if r.decide:
             self.decide.wait_for_service(self.decide_timeout)
             d = self.decide(task=self.plan.task, location=self.plan.location, force=FORCE[force], probe=True,
@@ -213,8 +213,8 @@ class TaskRunner:
         status = mission_status(outcomes, len(self.spec.goals))
         batteries = battery_fields((charge_at(comp, t0), charge_at(comp, t1)),
                                    (charge_at(base, t0), charge_at(base, t1)), decided=r.decide,
-                                   at_placing=charge_at(comp, decided_at - placing) if r.decide else None,
-                                   at_profile=charge_at(comp, decided_at - t_decision) if r.decide else None)
+                                   at_placing=charge_at(comp, decided_at - placing),
+                                   at_profile=charge_at(comp, decided_at - t_decision))
         b_task = batteries['b_task']
         row.update(mission_status=status, t_task=t_task, redecisions=len(self.redecisions), **batteries)
         if r.decide and not evaluable(b_task):
