@@ -150,9 +150,13 @@ def test_the_link_back_ends_it_and_the_ordinary_stand_in_goes_on(params):
     s, r, t = returning(params)
     t = r.run(t + 4.0, [('/goal_standin-1-14.0', ACTIVE)], speed=-0.5)    # driving back: x = 0 again, link up
     assert s.comms.goal(t) is None and s.comms.target is None and not s.comms.driving
-    assert s.standing_in and s.path.alive(t)          # the link and the source are back: no chain, the timeout
+    assert s.standing_in and s.path.alive(t)          # the link and the source are back: the comms-loss goal ends
     t = r.run(t + 1.0, [('/goal_standin-1-14.0', SUCCEEDED)])
-    assert s.comms.goal(t) is None and not s.due(t)
+    # no comms-loss goal; the ordinary stand-in chains its own goals until a goal of the source is pursued
+    assert s.comms.goal(t) is None and s.due(t)
+    s.sent()
+    t = r.run(t + 0.5, [('/goal_standin-2-19.5', ACTIVE), ('/mfg-2-19.6', ACTIVE)])
+    assert s.handed_back() and s.comms.goal(t) is None
 
 
 def test_a_source_goal_takes_over_from_the_comms_loss_goal(params):
