@@ -151,6 +151,36 @@ def test_diff_and_identity_conflicts():
     assert sync.conflicting_identities([b], []) == set()
 
 
+def test_a_forced_reconnect_respells_a_node_in_one_batch_where_the_master_holds_nothing_else_of_it():
+    """A peer that lost us and hears us again: its nodes are registered at the other spelling. Where the batch
+    removes every registration the master holds of a node, it is registered again in the same batch, right after
+    its own removals; a node the master holds beyond them waits for a poll (rosmaster would shut it down)."""
+    old, new = 'http://10.77.0.2:4000/', 'http://10.77.0.2:4000'
+    pub = sync.Registration('pub', '/goal', '/cloud/mfg', old, 'geometry_msgs/PoseStamped')
+    sub = sync.Registration('sub', '/pose', '/cloud/mfg', old, 'geometry_msgs/PoseStamped')
+    srv = sync.Registration('srv', '/reset', '/cloud/ggm', 'http://10.77.0.2:5000/', 'rosrpc://10.77.0.2:5001')
+    ggm = sync.Registration('pub', '/global_goal', '/cloud/ggm', 'http://10.77.0.2:5000/', 'std_msgs/String')
+    snap = snapshot(pubs={'/goal': {'/cloud/mfg', '/local'}, '/global_goal': {'/cloud/ggm'}},
+                    subs={'/pose': {'/cloud/mfg'}}, services={'/reset': '/cloud/ggm'},
+                    nodes={'/cloud/mfg': old, '/cloud/ggm': 'http://10.77.0.2:5000/', '/local': 'http://l:1/'})
+    unregister = [pub, sub, srv, ggm]
+    register = [r._replace(caller_api=r.caller_api.rstrip('/')) for r in unregister]
+    assert sync.respell_in_place(unregister, register, [], snap, {}) == {'/cloud/mfg', '/cloud/ggm'}
+    # the master lists a registration of mfg that the batch does not remove: it waits
+    assert sync.respell_in_place([pub], [register[0]], [], snap, {}) == set()
+    # the bridge keeps one of its registrations at the old spelling: it waits
+    assert sync.respell_in_place([pub], [register[0]], [sub], snap, {}) == set()
+    # a service of ggm that a local provider took over: the master holds ggm without listing it
+    assert sync.respell_in_place(unregister, register, [], snap,
+                                 {'/cloud/ggm': 'http://10.77.0.2:5000/'}) == {'/cloud/mfg'}
+    # not a change of spelling (a node new to the master, or started again at another port): not in place
+    moved = [r._replace(caller_api='http://10.77.0.2:4100') for r in register[:2]]
+    assert sync.respell_in_place(unregister[:2], moved, [], snap, {}) == set()
+    calls = sync.batch_order([pub, sub, srv, ggm], register, {'/cloud/mfg'})
+    assert calls == [(False, srv), (False, ggm), (False, sub), (False, pub), (True, register[0]),
+                     (True, register[1]), (True, register[2]), (True, register[3])]
+
+
 def test_protocol_authenticates_and_rejects_replays():
     msg = {'from': 'robot', 'session': 's1', 'seq': 1, 'kind': 'hb', 't1': 1.5}
     data = protocol.encode(b'secret-one', msg)

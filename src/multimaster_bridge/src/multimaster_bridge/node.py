@@ -43,6 +43,7 @@ class PeerState:
         self.last_req = -math.inf
         self.registered: Set[sync.Registration] = set()
         self.kept_spelling: Dict[str, str] = {}    # caller_id -> URI spelling the master still holds (this generation)
+        self.unlisted: Dict[str, str] = {}         # caller_id -> URI of a proxy the master holds without listing it
         self.lost_at = -math.inf
         self.returned_at = -math.inf
         self.their_view: Optional[bool] = None   # whether the peer's last heartbeat said it hears us
@@ -157,8 +158,10 @@ class MasterClient:
                 snap.service_apis[s] = uri
         return snap
 
-    def apply(self, unregister: List[sync.Registration], register: List[sync.Registration]) -> List[str]:
-        """Unregistrations then registrations in one batch; returns failures."""
+    def apply(self, unregister: List[sync.Registration], register: List[sync.Registration],
+              in_place: Set[str] = frozenset()) -> List[str]:
+        """Unregistrations then registrations in one batch (:func:`sync.batch_order`: the nodes of ``in_place``
+        removed and registered again node by node); returns failures."""
         if not unregister and not register:
             return []
         multi = xmlrpc.client.MultiCall(self._proxy())
@@ -166,23 +169,24 @@ class MasterClient:
         # subscribers of that, over a link that may be gone (a peer lost), and rosmaster's notifications have
         # no timeout: each one to a host cut off holds one of its notifier threads for minutes, and local
         # nodes' notifications then wait (a failover's new instance was not connected for 135 s)
-        unregister = sorted(unregister, key=lambda r: r.kind == 'pub')
-        for r in unregister:
+        calls = sync.batch_order(unregister, register, set(in_place))
+        for add, r in calls:
             if r.kind == 'pub':
-                multi.unregisterPublisher(r.caller_id, r.name, r.caller_api)
+                if add:
+                    multi.registerPublisher(r.caller_id, r.name, r.extra, r.caller_api)
+                else:
+                    multi.unregisterPublisher(r.caller_id, r.name, r.caller_api)
             elif r.kind == 'sub':
-                multi.unregisterSubscriber(r.caller_id, r.name, r.caller_api)
+                if add:
+                    multi.registerSubscriber(r.caller_id, r.name, r.extra, r.caller_api)
+                else:
+                    multi.unregisterSubscriber(r.caller_id, r.name, r.caller_api)
+            elif add:
+                multi.registerService(r.caller_id, r.name, r.extra, r.caller_api)
             else:
                 multi.unregisterService(r.caller_id, r.name, r.extra)
-        for r in register:
-            if r.kind == 'pub':
-                multi.registerPublisher(r.caller_id, r.name, r.extra, r.caller_api)
-            elif r.kind == 'sub':
-                multi.registerSubscriber(r.caller_id, r.name, r.extra, r.caller_api)
-            else:
-                multi.registerService(r.caller_id, r.name, r.extra, r.caller_api)
         failures = []
-        for r, result in zip(unregister + register, multi()):
+        for (_, r), result in zip(calls, multi()):
             if result[0] != 1:
                 failures.append(f'{r.kind} {r.name} as {r.caller_id}: {result[1]}')
         return failures
@@ -392,6 +396,7 @@ class Bridge:
             if not gone:
                 continue
             peer.registered -= gone
+            peer.unlisted.update({r.caller_id: r.caller_api for r in gone})
             for service, node in taken.items():
                 self.service_first_seen[(service, node, snap.service_apis.get(service, ''))] = now
             rospy.loginfo(f'bridge: {peer.peer.name}: {len(gone)} service proxies no longer served by the master '
@@ -449,9 +454,13 @@ class Bridge:
                     peer.kept_spelling.update(kept)
                     desired = sync.respell(desired, peer.kept_spelling)
                     unregister, register = sync.diff(peer.registered, desired)
-            # a proxy's URI spelling changes only after its old registrations are gone from the master
+            # a proxy's URI spelling changes only after its old registrations are gone from the master: in the
+            # same batch where it holds nothing else of it, else after a poll
+            keep = peer.registered - set(unregister)
+            in_place = sync.respell_in_place(unregister, register, keep, snap, peer.unlisted)
             waiting = {r.caller_id for r in register if sync.must_wait(snap.nodes.get(r.caller_id), r.caller_api)}
-            waiting |= sync.conflicting_identities(register, peer.registered - set(unregister))
+            waiting -= in_place
+            waiting |= sync.conflicting_identities(register, keep)
             register = [r for r in register if r.caller_id not in waiting]
             for r in register:
                 if r.kind == 'srv':
@@ -466,13 +475,15 @@ class Bridge:
             self.snapshot_stale = True
             self.poll_requested = True
             self.wake.set()
-            failures = self.master.apply(unregister, register)
+            failures = self.master.apply(unregister, register, in_place & {r.caller_id for r in register})
             for f in failures:
                 self._report(f'master refused {f}')
             peer.registered = (peer.registered - set(unregister)) | set(register)
             self._restore_shadowed([r for r in unregister if r.kind == 'srv'])
+            respelled = len(in_place & {r.caller_id for r in register})
             rospy.loginfo(f'bridge: {peer.peer.name}: -{len(unregister)} +{len(register)} registrations '
-                          f'in {1000 * (time.monotonic() - started):.1f} ms')
+                          f'in {1000 * (time.monotonic() - started):.1f} ms'
+                          + (f' ({respelled} nodes at a new URI spelling)' if respelled else ''))
 
     def _restore_shadowed(self, removed: List[sync.Registration]) -> None:
         """A local provider hidden by a removed proxy serves its service again."""

@@ -341,6 +341,56 @@ def must_wait(held: Optional[str], wanted: str) -> bool:
     return held is not None and held != wanted and same_node(held, wanted)
 
 
+def respell_in_place(unregister: Iterable[Registration], register: Iterable[Registration],
+                     keep: Iterable[Registration], snap: Snapshot, unlisted: Dict[str, str]) -> Set[str]:
+    """caller_ids whose URI spelling changes (:func:`must_wait`) and may change within one batch: all their
+    registrations removed, then registered again at the new spelling. rosmaster drops a node from its table when
+    its last registration goes, so the new spelling is then a new node, never a change that shuts the real one
+    down. That holds only when the batch removes every registration the master holds of it: none kept
+    (``keep``), none that ``snap`` lists outside ``unregister``, and none the master holds without listing it
+    (``unlisted``: caller_id -> URI, a service proxy a local provider took over or that went with one: rosmaster
+    keeps the key in the node's entry for good). Those wait for a poll as before."""
+    removed = {(r.kind, r.name, r.caller_id) for r in unregister}
+    kept = {r.caller_id for r in keep}
+    apis: Dict[str, Set[str]] = {}
+    for r in register:
+        apis.setdefault(r.caller_id, set()).add(r.caller_api)
+    listed: Dict[str, Set[Tuple[str, str]]] = {}
+    for kind, table in (('pub', snap.pubs), ('sub', snap.subs)):
+        for topic, nodes in table.items():
+            for node in nodes:
+                listed.setdefault(node, set()).add((kind, topic))
+    for service, node in snap.services.items():
+        listed.setdefault(node, set()).add(('srv', service))
+    out: Set[str] = set()
+    for cid, wanted in apis.items():
+        if len(wanted) != 1:
+            continue
+        api = next(iter(wanted))
+        if not must_wait(snap.nodes.get(cid), api) or cid in kept:
+            continue
+        if cid in unlisted and same_node(unlisted[cid], api):
+            continue
+        if all((kind, name, cid) in removed for kind, name in listed.get(cid, ())):
+            out.add(cid)
+    return out
+
+
+def batch_order(unregister: List[Registration], register: List[Registration],
+                in_place: Set[str]) -> List[Tuple[bool, Registration]]:
+    """The calls of one batch as (register?, registration): the removals first (a peer's subscribers and services
+    before its publishers), then each node of ``in_place`` removed and at once registered again (its registrations
+    are off the master only for its own few calls), then the other registrations."""
+    first = sorted((r for r in unregister if r.caller_id not in in_place), key=lambda r: r.kind == 'pub')
+    calls: List[Tuple[bool, Registration]] = [(False, r) for r in first]
+    for cid in sorted(in_place):
+        calls += [(False, r) for r in sorted((r for r in unregister if r.caller_id == cid),
+                                             key=lambda r: r.kind == 'pub')]
+        calls += [(True, r) for r in register if r.caller_id == cid]
+    calls += [(True, r) for r in register if r.caller_id not in in_place]
+    return calls
+
+
 def conflicting_identities(to_register: Iterable[Registration], keep: Iterable[Registration]) -> Set[str]:
     """caller_ids that would be registered with two different URIs at once (must wait for removals)."""
     apis: Dict[str, Set[str]] = {}
