@@ -255,7 +255,11 @@ class Manager:
         seen = 0
         run = Run(m)
         try:
-            ready = self._instance_up(module, target) and self._standby(book, target)
+            # a failover takes a standby its status calls ready at once: a ping first cost up to 2 s on the loaded
+            # robot, and the cut-off holder's renewals, queued in the link, were granted meanwhile (each one
+            # put the promotion off by a lease); a standby that is gone fails the promotion, which is rolled back
+            ready = self._standby_running(book, target) if failover else \
+                self._instance_up(module, target) and self._standby(book, target)
             with self.lock:
                 actions = m.begin(time.monotonic(), ready, self._holds_replica(book, target, m.source))
             while True:
@@ -280,6 +284,13 @@ class Manager:
     def _standby(self, book: ModuleBook, host: str) -> bool:
         st = book.status.get(host)
         return st is not None and st.role == InstanceStatus.STANDBY and st.ready
+
+    def _standby_running(self, book: ModuleBook, host: str) -> bool:
+        """A ready standby by its status whose process its agent reports running (no call: the status and the
+        health are the last published)."""
+        st = book.status.get(host)
+        state, _, pid = self.health.get(host, {}).get(book.module, (AgentHealth.STOPPED, 0, 0))
+        return self._standby(book, host) and state == AgentHealth.RUNNING and pid == st.pid
 
     def _poll(self, book: ModuleBook, run: Run) -> List:
         """Events from the world, then deadlines (caller holds the lock)."""
