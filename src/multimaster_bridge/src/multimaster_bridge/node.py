@@ -489,11 +489,10 @@ class Bridge:
         """A local provider hidden by a removed proxy serves its service again."""
         snap = self.snapshot
         for r in removed:
-            local = self.shadowed.pop(r.name, None)
-            if local is None or any(x.kind == 'srv' and x.name == r.name
-                                    for p in self.peers.values() for x in p.registered):
-                continue
-            node, service_api, node_api = local
+            if r.name not in self.shadowed or any(x.kind == 'srv' and x.name == r.name
+                                                  for p in self.peers.values() for x in p.registered):
+                continue        # a proxy still serves it (e.g. registered again at a new spelling): still hidden
+            node, service_api, node_api = self.shadowed.pop(r.name)
             if snap is not None and snap.nodes.get(node) == node_api and service_api:
                 try:
                     self.master.register_service(node, r.name, service_api, node_api)
