@@ -375,7 +375,9 @@ def test_a_kept_state_ages_with_the_time_since_it_arrived():
 def test_the_watch_keeps_every_change_of_the_violations():
     from multimaster_bridge.watch import changes
     samples = [(1.0, ['a']), (1.1, ['a']), (1.2, []), (1.3, []), (1.4, ['b']), (1.5, [])]
-    assert changes(samples) == [(1.0, ['a']), (1.2, []), (1.4, ['b']), (1.5, [])]
+    # each change with the poll before it: when the state before was last seen
+    assert changes(samples) == [(1.0, ['a']), (1.1, ['a']), (1.2, []), (1.3, []), (1.4, ['b']), (1.5, [])]
+    assert changes([(1.0, []), (1.1, []), (1.2, []), (1.3, ['a'])]) == [(1.0, []), (1.2, []), (1.3, ['a'])]
     assert changes([]) == []
 
 
@@ -410,16 +412,20 @@ def test_each_discrepancy_is_timed_from_the_return_or_from_when_it_arose():
     r = restore_times(samples, began=[9.0], ended=[10.0])
     # b: last seen absent at 10.95, gone at 11.4: 0.45 s
     assert r.restores[0] == pytest.approx(2.1) and r.lags[0] == pytest.approx(0.45)
-    # from the changes only (what watch.tsv keeps) a discrepancy counts from the change before: an overestimate
+    # what watch.tsv keeps (the changes, each with the poll before it) times them as every poll does
     record = changes(samples)
-    assert discrepancy_restore(record, 10.0) == (pytest.approx(1.1), 0.0)      # b: from 10.3 to 11.4
+    assert discrepancy_restore(record, 10.0) == (pytest.approx(0.45), 0.0)
     assert unbroken_restore(record, 10.0) == pytest.approx(2.1)
+    # a record of the changes alone (older watch.tsv files): from the change before, an overestimate
+    alone = [(t, w) for i, (t, w) in enumerate(samples) if i == 0 or w != samples[i - 1][1]]
+    assert discrepancy_restore(alone, 10.0) == (pytest.approx(1.1), 0.0)      # b: from 10.3 to 11.4
+    assert discrepancy_restore(alone, 10.0, window_end=12.05) == (None, pytest.approx(0.65))   # c: from 11.4
     # none after the return: 0 (the watch then reports its first poll after the return)
     assert discrepancy_restore([(9.5, []), (11.0, [])], 10.0) == (0.0, 0.0)
     assert restore_times([(9.5, []), (10.05, []), (10.1, [])], [9.0], [10.0]).lags == [pytest.approx(0.05)]
     # still there when the next outage begins: open, with its age then
     lag, open_age = discrepancy_restore(record, 10.0, window_end=12.05)
-    assert lag is None and open_age == pytest.approx(0.65)                     # c: from the change at 11.4
+    assert lag is None and open_age == pytest.approx(0.1)                      # c: from the poll at 11.95
     assert discrepancy_restore(samples, 10.0, window_end=12.05) == (None, pytest.approx(0.1))   # from 11.95
     assert unbroken_restore(record, 10.0, window_end=12.05) is None
     assert discrepancy_restore([(9.5, ['a'])], 10.0, window_end=13.0) == (None, 3.0)

@@ -15,7 +15,7 @@ While a run plays, both masters are polled (20 Hz) and, per outage, the restore 
 each discrepancy between what a master holds of the other's registrations and what it should is timed from the
 link's return, or from when it arose if later, until it is gone; the restore is the longest (and, beside it, the
 time until the invariant held unbroken until the next outage). Per run, in
-bench_results/flap/runs/<config>-<i>/: the mission's report, schedule.tsv, restore.tsv, watch.tsv (every change of the invariant's discrepancies, one per registration, wall time), the mission's output
+bench_results/flap/runs/<config>-<i>/: the mission's report, schedule.tsv, restore.tsv, watch.tsv (every change of the invariant's discrepancies, one per registration, wall time, with the poll before each), the mission's output
 (<folder>.log). Resumable: a run whose summary.json exists is kept (--fresh starts over). Then the page
 docs/results/flap/README.md (or DIR) and runs.tsv. About 5 minutes per run.
 """

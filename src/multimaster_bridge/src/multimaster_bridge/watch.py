@@ -244,8 +244,9 @@ class RestoreWatch:
             return list(self._samples[-1][1]) if self._samples else ['not polled yet']
 
     def changes(self) -> List[Tuple[float, List[str]]]:
-        """Every poll whose violations differ from the poll before (the first one too): (time, violations), in
-        time order; what a later analysis needs to judge the registrations across by any other criterion."""
+        """Every poll whose violations differ from the poll before (the first one too), each with the poll before
+        it (:func:`multimaster_bridge.core.restore.changes`): (time, violations), in time order; what a later
+        analysis needs to judge the registrations across by any other criterion, to one poll."""
         with self._lock:
             return changes(list(self._samples))
 

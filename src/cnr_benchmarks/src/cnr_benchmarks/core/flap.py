@@ -171,8 +171,9 @@ def restores_of(folder: str, events: Sequence['Event']) -> Tuple[List[Optional[f
     """Per outage: the restore per discrepancy and the unbroken restore as recorded at run time (``restore.tsv``,
     timed on every poll; None: not restored), and whether the outage was cut short: the next event began less than
     RESTORE_GOAL after the return (:func:`cut_short`), or, from ``watch.tsv`` where it names the discrepancies one
-    by one, those still open when it began had arisen less than RESTORE_GOAL before (counted from the change before
-    the one that first shows them: an overestimate, never a cut too many)."""
+    by one, those still open when it began had arisen less than RESTORE_GOAL before (counted from the poll before
+    the one that first shows them, which watch.tsv keeps beside each change; in an older file without it, from the
+    change before: an overestimate, never a cut too many)."""
     lags, unbroken = read_restores(folder)
     short = cut_short(lags, events)
     record = read_watch(folder)

@@ -8,7 +8,8 @@ measures per outage, both from the link's return at ``t`` within the window that
 - :func:`discrepancy_restore`: each discrepancy timed from ``t``, or from when it arose if later (the peer
   registered something after the return, e.g. a module's new instance), until it is gone; the restore is the
   longest. When it arose is taken as the entry before the one that first shows it (when it was last seen absent):
-  exact to one poll for a record of every poll, an overestimate for a record of changes only. A discrepancy still
+  exact to one poll for a record of every poll and for :func:`changes`, which keeps the poll before each change
+  (an older record of the changes alone overestimates it: counted from the change before). A discrepancy still
   there when the window ends is open: the outage is not restored, unless it arose less than the bound before the
   window ended (then the next outage cut it short: it can neither meet nor miss it).
 - :func:`unbroken_restore`: from ``t`` until the invariant held without a break to the window's end.
@@ -22,11 +23,17 @@ Record = Sequence[Tuple[float, List[str]]]
 
 
 def changes(samples: Record) -> List[Tuple[float, List[str]]]:
-    """The entries whose discrepancies differ from the entry before (the first one too)."""
+    """The entries whose discrepancies differ from the entry before (the first one too), each preceded by the last
+    entry of the state before it (when that state was last seen: a discrepancy that a change shows arose after it),
+    unless that is the change itself."""
     out: List[Tuple[float, List[str]]] = []
+    last: Optional[Tuple[float, List[str]]] = None
     for t, wrong in samples:
         if not out or wrong != out[-1][1]:
+            if last is not None and last[0] != out[-1][0]:
+                out.append(last)
             out.append((t, list(wrong)))
+        last = (t, list(wrong))
     return out
 
 
