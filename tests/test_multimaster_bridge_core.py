@@ -177,8 +177,8 @@ def test_a_forced_reconnect_respells_a_node_in_one_batch_where_the_master_holds_
     moved = [r._replace(caller_api='http://10.77.0.2:4100') for r in register[:2]]
     assert sync.respell_in_place(unregister[:2], moved, [], snap, {}) == set()
     calls = sync.batch_order([pub, sub, srv, ggm], register, {'/cloud/mfg'})
-    assert calls == [(False, srv), (False, ggm), (True, register[2]), (True, register[3]),
-                     (False, sub), (False, pub), (True, register[0]), (True, register[1])]
+    assert calls == [(False, srv), (False, ggm), (False, sub), (False, pub), (True, register[0]),
+                     (True, register[1]), (True, register[2]), (True, register[3])]
 
 
 def test_protocol_authenticates_and_rejects_replays():

@@ -129,32 +129,8 @@ def test_a_remote_node_started_again_replaces_the_entry_a_taken_over_service_kep
         assert client.node_apis(['/cloud/ggm']) == {'/cloud/ggm': old}     # held for ever by the service entry
         assert not sync.must_wait(old, new)
         again = sync.Registration('pub', '/global_goal', '/cloud/ggm', new, 'std_msgs/String')
-        assert client.apply([], [again]) == ([(True, again)], [])
+        assert client.apply([], [again]) == []
         assert client.node_apis(['/cloud/ggm']) == {'/cloud/ggm': new}
         pubs = dict(px.getSystemState('/test')[2][0])
         assert pubs['/global_goal'] == ['/cloud/ggm']
         assert px.lookupNode('/test', '/cloud/ggm')[2] == new
-
-
-def test_a_batch_goes_in_calls_of_batch_size_and_stops_between_them_when_told():
-    """A lost peer's registrations are removed batch_size at a time; when the peer is heard again the removal stops
-    between two calls, and the caller learns which registrations were removed."""
-    with RosMaster() as master:
-        px = xmlrpc.client.ServerProxy(master.uri)
-        regs = [sync.Registration('pub', f'/t{i}', '/cloud/n', 'http://127.0.0.1:10001/', 'std_msgs/String')
-                for i in range(5)]
-        for r in regs:
-            px.registerPublisher(r.caller_id, r.name, r.extra, r.caller_api)
-        client = MasterClient(master.uri, '/bridge')
-        asked = []
-
-        def go_on() -> bool:
-            asked.append(True)
-            return len(asked) < 2          # the peer is back before the third call
-
-        made, failures = client.apply(regs, [], batch_size=2, go_on=go_on)
-        assert failures == [] and made == [(False, r) for r in regs[:4]]
-        left = {t for t, _ in px.getSystemState('/test')[2][0]}
-        assert left == {'/t4'}
-        made, failures = client.apply(regs[4:], [], batch_size=2, go_on=lambda: False)   # one call: never asked
-        assert made == [(False, regs[4])] and failures == []

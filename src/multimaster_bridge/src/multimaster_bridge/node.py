@@ -11,7 +11,7 @@ import socket
 import threading
 import time
 import xmlrpc.client
-from typing import Callable, Dict, List, Optional, Set, Tuple
+from typing import Dict, List, Optional, Set, Tuple
 
 import rosgraph
 import rospy
@@ -159,45 +159,37 @@ class MasterClient:
         return snap
 
     def apply(self, unregister: List[sync.Registration], register: List[sync.Registration],
-              in_place: Set[str] = frozenset(), batch_size: int = 0,
-              go_on: Callable[[], bool] = lambda: True) -> Tuple[List[Tuple[bool, sync.Registration]], List[str]]:
-        """Unregistrations then registrations (:func:`sync.batch_order`: the nodes of ``in_place`` removed and
-        registered again node by node), ``batch_size`` calls per multicall (0: all in one); before each multicall
-        after the first, ``go_on()`` says whether to go on. Returns the calls made, as (register?, registration),
-        and the failures among them."""
+              in_place: Set[str] = frozenset()) -> List[str]:
+        """Unregistrations then registrations in one batch (:func:`sync.batch_order`: the nodes of ``in_place``
+        removed and registered again node by node); returns failures."""
+        if not unregister and not register:
+            return []
+        multi = xmlrpc.client.MultiCall(self._proxy())
         # a peer's subscribers and services go first: removing its publishers first made the master notify its
         # subscribers of that, over a link that may be gone (a peer lost), and rosmaster's notifications have
         # no timeout: each one to a host cut off holds one of its notifier threads for minutes, and local
         # nodes' notifications then wait (a failover's new instance was not connected for 135 s)
         calls = sync.batch_order(unregister, register, set(in_place))
-        size = batch_size or max(1, len(calls))
-        made: List[Tuple[bool, sync.Registration]] = []
-        failures: List[str] = []
-        for start in range(0, len(calls), size):
-            if start and not go_on():
-                break
-            chunk = calls[start:start + size]
-            multi = xmlrpc.client.MultiCall(self._proxy())
-            for add, r in chunk:
-                if r.kind == 'pub':
-                    if add:
-                        multi.registerPublisher(r.caller_id, r.name, r.extra, r.caller_api)
-                    else:
-                        multi.unregisterPublisher(r.caller_id, r.name, r.caller_api)
-                elif r.kind == 'sub':
-                    if add:
-                        multi.registerSubscriber(r.caller_id, r.name, r.extra, r.caller_api)
-                    else:
-                        multi.unregisterSubscriber(r.caller_id, r.name, r.caller_api)
-                elif add:
-                    multi.registerService(r.caller_id, r.name, r.extra, r.caller_api)
+        for add, r in calls:
+            if r.kind == 'pub':
+                if add:
+                    multi.registerPublisher(r.caller_id, r.name, r.extra, r.caller_api)
                 else:
-                    multi.unregisterService(r.caller_id, r.name, r.extra)
-            for (add, r), result in zip(chunk, multi()):
-                made.append((add, r))
-                if result[0] != 1:
-                    failures.append(f'{r.kind} {r.name} as {r.caller_id}: {result[1]}')
-        return made, failures
+                    multi.unregisterPublisher(r.caller_id, r.name, r.caller_api)
+            elif r.kind == 'sub':
+                if add:
+                    multi.registerSubscriber(r.caller_id, r.name, r.extra, r.caller_api)
+                else:
+                    multi.unregisterSubscriber(r.caller_id, r.name, r.caller_api)
+            elif add:
+                multi.registerService(r.caller_id, r.name, r.extra, r.caller_api)
+            else:
+                multi.unregisterService(r.caller_id, r.name, r.extra)
+        failures = []
+        for (_, r), result in zip(calls, multi()):
+            if result[0] != 1:
+                failures.append(f'{r.kind} {r.name} as {r.caller_id}: {result[1]}')
+        return failures
 
     def node_apis(self, caller_ids: List[str]) -> Dict[str, str]:
         """caller_id -> URI for those the master knows (its own node table: an entry stays while any
@@ -483,25 +475,15 @@ class Bridge:
             self.snapshot_stale = True
             self.poll_requested = True
             self.wake.set()
-            in_place &= {r.caller_id for r in register}
-            # a peer heard again stops the removal of its registrations, a peer lost the import of them: the rest
-            # is planned anew from what it holds then (the master is spared the work of a short cut twice over)
-            alive = state is not None
-            made, failures = self.master.apply(unregister, register, in_place, self.cfg.batch_size,
-                                               lambda: (peer.alive and peer.state is not None) == alive)
+            failures = self.master.apply(unregister, register, in_place & {r.caller_id for r in register})
             for f in failures:
                 self._report(f'master refused {f}')
-            removed = [r for add, r in made if not add]
-            added = [r for add, r in made if add]
-            peer.registered = (peer.registered - set(removed)) | set(added)
-            self._restore_shadowed([r for r in removed if r.kind == 'srv'])
-            respelled = len(in_place & {r.caller_id for r in added})
-            stopped = len(made) < len(unregister) + len(register)
-            rospy.loginfo(f'bridge: {peer.peer.name}: -{len(removed)} +{len(added)} registrations '
+            peer.registered = (peer.registered - set(unregister)) | set(register)
+            self._restore_shadowed([r for r in unregister if r.kind == 'srv'])
+            respelled = len(in_place & {r.caller_id for r in register})
+            rospy.loginfo(f'bridge: {peer.peer.name}: -{len(unregister)} +{len(register)} registrations '
                           f'in {1000 * (time.monotonic() - started):.1f} ms'
-                          + (f' ({respelled} nodes at a new URI spelling)' if respelled else '')
-                          + (f'; stopped before the other {len(unregister) + len(register) - len(made)}: the peer '
-                             f'is {"lost" if alive else "heard again"}' if stopped else ''))
+                          + (f' ({respelled} nodes at a new URI spelling)' if respelled else ''))
 
     def _restore_shadowed(self, removed: List[sync.Registration]) -> None:
         """A local provider hidden by a removed proxy serves its service again."""

@@ -30,7 +30,6 @@ class BridgeConfig:
     loss_timeout: float
     poll_rate: float
     quality_rate: float
-    batch_size: int           # registrations per call to the master (a removal stops between them when the peer returns)
     nice: int                 # the bridge's CPU priority (cnr_runtime.priority)
     extra: dict = field(default_factory=dict)
 
@@ -101,7 +100,6 @@ def parse(section: Section) -> BridgeConfig:
         loss_timeout=section.number('loss_timeout', positive=True),
         poll_rate=section.number('poll_rate', minimum=0.05, maximum=100.0),
         quality_rate=section.number('quality_rate', positive=True),
-        batch_size=section.integer('batch_size', minimum=1, maximum=10000),
         nice=section.integer('nice', minimum=-20, maximum=19))
     if cfg.loss_timeout < 3.0 / cfg.heartbeat_rate:
         raise section.error('loss_timeout', f'must cover at least 3 heartbeats ({3.0 / cfg.heartbeat_rate:.2f} s)')

@@ -379,16 +379,15 @@ def respell_in_place(unregister: Iterable[Registration], register: Iterable[Regi
 def batch_order(unregister: List[Registration], register: List[Registration],
                 in_place: Set[str]) -> List[Tuple[bool, Registration]]:
     """The calls of one batch as (register?, registration): the removals first (a peer's subscribers and services
-    before its publishers), then the other registrations (what the master lacks), then each node of ``in_place``
-    removed and at once registered again (the master holds it meanwhile, at its old spelling; off the master only
-    for its own few calls)."""
+    before its publishers), then each node of ``in_place`` removed and at once registered again (its registrations
+    are off the master only for its own few calls), then the other registrations."""
     first = sorted((r for r in unregister if r.caller_id not in in_place), key=lambda r: r.kind == 'pub')
     calls: List[Tuple[bool, Registration]] = [(False, r) for r in first]
-    calls += [(True, r) for r in register if r.caller_id not in in_place]
     for cid in sorted(in_place):
         calls += [(False, r) for r in sorted((r for r in unregister if r.caller_id == cid),
                                              key=lambda r: r.kind == 'pub')]
         calls += [(True, r) for r in register if r.caller_id == cid]
+    calls += [(True, r) for r in register if r.caller_id not in in_place]
     return calls
 
 
