@@ -462,6 +462,7 @@ class Bridge:
             waiting -= in_place
             waiting |= sync.conflicting_identities(register, keep)
             register = [r for r in register if r.caller_id not in waiting]
+            in_place &= {r.caller_id for r in register}
             for r in register:
                 if r.kind == 'srv':
                     provider = snap.services.get(r.name)
@@ -475,15 +476,14 @@ class Bridge:
             self.snapshot_stale = True
             self.poll_requested = True
             self.wake.set()
-            failures = self.master.apply(unregister, register, in_place & {r.caller_id for r in register})
+            failures = self.master.apply(unregister, register, in_place)
             for f in failures:
                 self._report(f'master refused {f}')
             peer.registered = (peer.registered - set(unregister)) | set(register)
             self._restore_shadowed([r for r in unregister if r.kind == 'srv'])
-            respelled = len(in_place & {r.caller_id for r in register})
             rospy.loginfo(f'bridge: {peer.peer.name}: -{len(unregister)} +{len(register)} registrations '
                           f'in {1000 * (time.monotonic() - started):.1f} ms'
-                          + (f' ({respelled} nodes at a new URI spelling)' if respelled else ''))
+                          + (f' ({len(in_place)} nodes at a new URI spelling)' if in_place else ''))
 
     def _restore_shadowed(self, removed: List[sync.Registration]) -> None:
         """A local provider hidden by a removed proxy serves its service again."""
