@@ -350,30 +350,20 @@ def respell_in_place(unregister: Iterable[Registration], register: Iterable[Regi
     (``keep``), none that ``snap`` lists outside ``unregister``, and none the master holds without listing it
     (``unlisted``: caller_id -> URI, a service proxy a local provider took over or that went with one: rosmaster
     keeps the key in the node's entry for good). Those wait for a poll as before."""
-    removed = {(r.kind, r.name, r.caller_id) for r in unregister}
-    kept = {r.caller_id for r in keep}
     apis: Dict[str, Set[str]] = {}
     for r in register:
         apis.setdefault(r.caller_id, set()).add(r.caller_api)
-    listed: Dict[str, Set[Tuple[str, str]]] = {}
-    for kind, table in (('pub', snap.pubs), ('sub', snap.subs)):
-        for topic, nodes in table.items():
-            for node in nodes:
-                listed.setdefault(node, set()).add((kind, topic))
-    for service, node in snap.services.items():
-        listed.setdefault(node, set()).add(('srv', service))
-    out: Set[str] = set()
-    for cid, wanted in apis.items():
-        if len(wanted) != 1:
-            continue
-        api = next(iter(wanted))
-        if not must_wait(snap.nodes.get(cid), api) or cid in kept:
-            continue
-        if cid in unlisted and same_node(unlisted[cid], api):
-            continue
-        if all((kind, name, cid) in removed for kind, name in listed.get(cid, ())):
-            out.add(cid)
-    return out
+    kept = {r.caller_id for r in keep}
+    candidates = {cid for cid, wanted in apis.items()
+                  if len(wanted) == 1 and cid not in kept and must_wait(snap.nodes.get(cid), next(iter(wanted)))
+                  and not (cid in unlisted and same_node(unlisted[cid], next(iter(wanted))))}
+    if not candidates:          # every reconcile but a forced reconnect's: the snapshot is not walked
+        return set()
+    removed = {(r.kind, r.name, r.caller_id) for r in unregister}
+    listed = [(kind, name, node) for kind, table in (('pub', snap.pubs), ('sub', snap.subs))
+              for name, nodes in table.items() for node in nodes if node in candidates]
+    listed += [('srv', name, node) for name, node in snap.services.items() if node in candidates]
+    return candidates - {node for kind, name, node in listed if (kind, name, node) not in removed}
 
 
 def batch_order(unregister: List[Registration], register: List[Registration],
@@ -381,11 +371,10 @@ def batch_order(unregister: List[Registration], register: List[Registration],
     """The calls of one batch as (register?, registration): the removals first (a peer's subscribers and services
     before its publishers), then each node of ``in_place`` removed and at once registered again (its registrations
     are off the master only for its own few calls), then the other registrations."""
-    first = sorted((r for r in unregister if r.caller_id not in in_place), key=lambda r: r.kind == 'pub')
-    calls: List[Tuple[bool, Registration]] = [(False, r) for r in first]
+    removals = sorted(unregister, key=lambda r: r.kind == 'pub')
+    calls: List[Tuple[bool, Registration]] = [(False, r) for r in removals if r.caller_id not in in_place]
     for cid in sorted(in_place):
-        calls += [(False, r) for r in sorted((r for r in unregister if r.caller_id == cid),
-                                             key=lambda r: r.kind == 'pub')]
+        calls += [(False, r) for r in removals if r.caller_id == cid]
         calls += [(True, r) for r in register if r.caller_id == cid]
     calls += [(True, r) for r in register if r.caller_id not in in_place]
     return calls
