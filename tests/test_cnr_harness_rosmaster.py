@@ -105,3 +105,47 @@ def test_a_running_notification_is_not_superseded_and_other_tasks_never_are():
     wait_until(lambda: pool.pending() == 0, 5.0, 'the updates')
     assert sent == [['a'], ['a', 'b', 'c'], 'other', 'other']
 
+
+
+def test_a_graph_query_is_told_apart_from_other_calls_and_from_odd_requests():
+    import xmlrpc.client
+    from cnr_harness.rosmaster import GraphAnswers
+    assert GraphAnswers.query(xmlrpc.client.dumps(('/w',), 'getSystemState').encode()) == b'getSystemState'
+    assert GraphAnswers.query(xmlrpc.client.dumps(('/w',), 'getTopicTypes').encode()) == b'getTopicTypes'
+    assert GraphAnswers.query(xmlrpc.client.dumps(('/w', ''), 'getPublishedTopics').encode()) is None
+    # a call rosmaster answers with an error goes to it as it is
+    assert GraphAnswers.query(xmlrpc.client.dumps(('/w', 'extra'), 'getSystemState').encode()) is None
+    multi = xmlrpc.client.dumps(([{'methodName': 'getSystemState', 'params': ['/w']}],), 'system.multicall').encode()
+    assert GraphAnswers.query(multi) is None
+
+
+def test_the_master_s_kept_answers_follow_every_change_of_the_graph(tmp_path):
+    """A real cnr_harness.rosmaster: getSystemState and getTopicTypes answer from what it keeps, and each kind of
+    change — a registration, an unregistration, a MultiCall of them, a node at a new URI (rosmaster drops its old
+    registrations) — shows in the very next answer."""
+    import xmlrpc.client
+    from cnr_harness import RosMaster, master_proxy
+    with RosMaster(str(tmp_path), multi_master=True) as master:
+        m = master_proxy(master.uri, 10.0, compressed=False)
+
+        def topics(kind=0):
+            code, _, state = m.getSystemState('/t')
+            assert code == 1
+            return {t: sorted(nodes) for t, nodes in state[kind]}
+
+        assert '/a' not in topics()
+        m.registerPublisher('/n1', '/a', 'std_msgs/String', 'http://127.0.0.1:1/')
+        assert topics()['/a'] == ['/n1']
+        assert topics()['/a'] == ['/n1']                        # kept: the same answer again
+        assert ['/a', 'std_msgs/String'] in m.getTopicTypes('/t')[2]
+        multi = xmlrpc.client.MultiCall(m)
+        multi.registerSubscriber('/n2', '/a', 'std_msgs/String', 'http://127.0.0.1:2/')
+        multi.registerService('/n2', '/s', 'rosrpc://127.0.0.1:3', 'http://127.0.0.1:2/')
+        multi.registerPublisher('/n2', '/b', 'std_msgs/Int32', 'http://127.0.0.1:2/')
+        list(multi())
+        assert topics(1)['/a'] == ['/n2'] and topics(2)['/s'] == ['/n2'] and topics()['/b'] == ['/n2']
+        assert ['/b', 'std_msgs/Int32'] in m.getTopicTypes('/t')[2]
+        m.unregisterPublisher('/n1', '/a', 'http://127.0.0.1:1/')
+        assert '/a' not in topics()
+        m.registerPublisher('/n2', '/c', 'std_msgs/String', 'http://127.0.0.1:9/')   # /n2 at a new URI
+        assert '/b' not in topics() and '/s' not in topics(2) and topics()['/c'] == ['/n2']

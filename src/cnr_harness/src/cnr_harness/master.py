@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import sys
 import tempfile
 import time
 import xmlrpc.client
@@ -10,9 +11,12 @@ from typing import Any, List, Mapping, Optional, Sequence
 from cnr_harness.process import Proc, free_port, wait_until
 
 
-def master_proxy(uri: str, timeout: float) -> xmlrpc.client.ServerProxy:
-    """An XML-RPC proxy of the master (or any node) at ``uri`` whose calls give up after ``timeout`` seconds."""
-    return xmlrpc.client.ServerProxy(uri, transport=_TimeoutTransport(timeout))
+def master_proxy(uri: str, timeout: float, compressed: bool = True) -> xmlrpc.client.ServerProxy:
+    """An XML-RPC proxy of the master (or any node) at ``uri`` whose calls give up after ``timeout`` seconds. Its
+    calls share one kept-alive connection (HTTP/1.1). ``compressed=False``: answers are not asked gzipped (xmlrpc
+    compresses those above 1400 B when the client accepts it: CPU for the master, for nothing on one host or a
+    LAN; getSystemState's answer is tens of KB)."""
+    return xmlrpc.client.ServerProxy(uri, transport=_TimeoutTransport(timeout, compressed))
 
 
 def master_answers(uri: str, caller: str = '/cnr_harness', timeout: float = 1.0) -> bool:
@@ -25,9 +29,10 @@ def master_answers(uri: str, caller: str = '/cnr_harness', timeout: float = 1.0)
 
 
 class _TimeoutTransport(xmlrpc.client.Transport):
-    def __init__(self, timeout: float) -> None:
+    def __init__(self, timeout: float, compressed: bool = True) -> None:
         super().__init__()
         self._timeout = timeout
+        self.accept_gzip_encoding = compressed
 
     def make_connection(self, host):
         conn = super().make_connection(host)
@@ -45,6 +50,8 @@ class RosMaster:
         env: base environment of the processes (default: this process's); ``ROS_MASTER_URI`` and ``ROS_IP``
             are set, ``ROS_HOSTNAME`` removed.
         roscore: start ``roscore`` (master and rosout) instead of ``rosmaster --core``.
+        multi_master: start the master of one host of several, :mod:`cnr_harness.rosmaster` (as the testbed's
+            hosts and ``ros_master.sh --multi-master`` do), instead of ``rosmaster --core``.
         use_sim_time: if not ``None``, ``/use_sim_time`` is set to it once the master answers.
         timeout: seconds to wait for the master to answer.
         caller: the caller id of the harness's own master calls.
@@ -52,7 +59,8 @@ class RosMaster:
 
     def __init__(self, log_dir: Optional[str] = None, host: str = '127.0.0.1', port: int = 0,
                  env: Optional[Mapping[str, str]] = None, roscore: bool = False,
-                 use_sim_time: Optional[bool] = None, timeout: float = 20.0, caller: str = '/cnr_harness') -> None:
+                 use_sim_time: Optional[bool] = None, timeout: float = 20.0, caller: str = '/cnr_harness',
+                 multi_master: bool = False) -> None:
         self.log_dir = log_dir or tempfile.mkdtemp(prefix='cnr-harness-')
         self.port = port or free_port(host)
         self.uri = f'http://{host}:{self.port}/'
@@ -60,7 +68,9 @@ class RosMaster:
         self.env = dict(os.environ if env is None else env, ROS_MASTER_URI=self.uri, ROS_IP=host)
         self.env.pop('ROS_HOSTNAME', None)
         self.children: List[Proc] = []
-        argv = ['roscore', '-p', str(self.port)] if roscore else ['rosmaster', '--core', '-p', str(self.port)]
+        argv = ['roscore', '-p', str(self.port)] if roscore else \
+            [sys.executable, '-m', 'cnr_harness.rosmaster', '--core', '-p', str(self.port)] if multi_master else \
+            ['rosmaster', '--core', '-p', str(self.port)]
         self.proc = Proc(argv, self.log_path('roscore' if roscore else 'rosmaster'), self.env)
         try:
             wait_until(self.answers, timeout, f'the rosmaster on port {self.port}', self.proc)
