@@ -221,3 +221,13 @@ def test_mission_b_task_and_summary_per_pack():
     without.add(reading(1, 0.99, 5.148))
     without.add(reading(2, 0.97, 5.044))
     assert without.used_to_hotspot() == pytest.approx(0.02)                  # no hotspot: to the last reading
+
+
+def test_a_task_s_first_result_makes_its_folder(tmp_path):
+    """The first run of a task with no results yet (e.g. exp_control.sh --task corridor_long) writes into a folder
+    that does not exist: made, not a FileNotFoundError in the task runner."""
+    from cnr_mission.core.task import append_result, read_results
+    path = tmp_path / 'control' / 'corridor_long@corridor' / 'results.tsv'
+    append_result(str(path), dict(id='control-01', condition='c', b_task=0.003, b_base=0.01))
+    rows, warnings = read_results(str(path))
+    assert [r['id'] for r in rows] == ['control-01'] and not warnings

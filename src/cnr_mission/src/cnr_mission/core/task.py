@@ -218,7 +218,8 @@ def _fmt(v) -> str:
 def append_result(path: str, values: Dict) -> None:
     """Append one run's row to the results TSV (header first if the file is new; an existing file's columns,
     :func:`_columns`), flushed to disk. A file that does not end with a newline (a torn last line) gets one
-    first, so only that line is lost."""
+    first, so only that line is lost. The file's folder is made if missing (a task's first run)."""
+    os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
     new = not os.path.exists(path) or os.path.getsize(path) == 0
     columns = RESULT_COLUMNS
     with open(path, 'a+b') as f:
