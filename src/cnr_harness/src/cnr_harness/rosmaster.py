@@ -27,12 +27,13 @@ whole list of publishers, so only the newest counts): a peer's 30 publishers on 
 per topic, not once per publisher.
 
 And the graph's answers are kept: ``getSystemState`` and ``getTopicTypes`` depend on the registrations only (not on
-the caller), yet every poll had the master build and marshal them anew — 1.3 ms of its CPU for 40 nodes of 9
-registrations each, and the bridge polls at 10 Hz on a CPU-capped robot. :class:`GraphAnswers` keeps each one's
+the caller), yet every poll had the master build and marshal them anew — 0.65 ms of its CPU for 40 nodes of 9
+registrations each (0.15 ms kept), and the bridge polls at 10 Hz on a CPU-capped robot. :class:`GraphAnswers` keeps each one's
 marshalled answer until a registration call (``register*``/``unregister*``) has returned since it was made.
 """
 from __future__ import annotations
 
+import functools
 import logging
 import sys
 import threading
@@ -217,7 +218,6 @@ class GraphAnswers:
         self.version = 0
         self._lock = threading.Lock()
         self._answers: Dict[bytes, Any] = {}        # method -> (version, marshalled answer)
-        self.hits = 0
 
     def changed(self) -> None:
         with self._lock:
@@ -225,12 +225,12 @@ class GraphAnswers:
 
     def changing(self, call: Callable[..., Any]) -> Callable[..., Any]:
         """A registration call of rosmaster's handler that bumps the version once it has returned."""
+        @functools.wraps(call)
         def bump(*args: Any, **kwargs: Any) -> Any:
             try:
                 return call(*args, **kwargs)
             finally:
                 self.changed()
-        bump.__name__, bump.__doc__ = call.__name__, call.__doc__
         return bump
 
     @staticmethod
@@ -256,7 +256,6 @@ class GraphAnswers:
                 version = self.version
                 kept = self._answers.get(method)
             if kept is not None and kept[0] == version:
-                self.hits += 1
                 return kept[1]
             answer = dispatch(server, data, dispatch_method, path)
             if b'<fault>' not in answer:

@@ -80,16 +80,13 @@ class MasterReader:
         self._proxy: Optional[xmlrpc.client.ServerProxy] = None
         self._lock = threading.Lock()               # one call at a time on the connection
 
-    def _master(self) -> xmlrpc.client.ServerProxy:
-        if self._proxy is None:
-            self._proxy = master_proxy(self.uri, self.timeout, compressed=False)
-        return self._proxy
-
     def _call(self, call: Callable[[xmlrpc.client.ServerProxy], Any]) -> Any:
         """``call(proxy)`` inside the namespace; after a failure the next call connects anew."""
         with self._lock, self._place():
+            if self._proxy is None:
+                self._proxy = master_proxy(self.uri, self.timeout, compressed=False)
             try:
-                return call(self._master())
+                return call(self._proxy)
             except (OSError, xmlrpc.client.Error, http.client.HTTPException):
                 self._proxy = None
                 raise
