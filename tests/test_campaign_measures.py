@@ -402,3 +402,37 @@ def test_the_analysis_of_a_learning_plan(tmp_path, monkeypatch):
     page = (out / 'README.md').read_text()
     assert '10 training conditions run once each in the placement the robot chose, 4 held-out' in page
     assert 'Without a pair' not in page
+
+
+def test_a_plan_of_two_tasks_deals_the_conditions_in_turn_and_holds_out_each_tasks_last(tmp_path):
+    import yaml
+    from cnr_mission.core.task import load_plan
+    drawn = campaign.draw_conditions(8, 7, campaign.Ranges(0, 250, 0.5, 50, 0, 0.1))
+    conditions = campaign.learning_split(campaign.assign_tasks(drawn, ['corridor_long', 'corridor_round_trip']), 0.25)
+    assert [(c.id, c.task) for c in conditions] == [
+        ('c0001', 'corridor_long'), ('c0002', 'corridor_round_trip'), ('c0003', 'corridor_long'),
+        ('c0004', 'corridor_round_trip'), ('c0005', 'corridor_long'), ('c0006', 'corridor_round_trip'),
+        ('h0007', 'corridor_long'), ('h0008', 'corridor_round_trip')]
+    assert campaign.assign_tasks(drawn, ['corridor_long']) == drawn
+    path = tmp_path / 'plan.yaml'
+    path.write_text(yaml.safe_dump(campaign.learning_plan_document('corridor_long', 'corridor', 6.0, conditions, 2)))
+    plan = load_plan(str(path))
+    assert plan.tasks == ['corridor_long', 'corridor_round_trip']
+    assert [plan.task_of(r) for r in plan.runs[:2]] == ['corridor_long', 'corridor_round_trip']
+    assert {plan.task_of(r) for r in plan.runs if r.condition == 'h0008'} == {'corridor_round_trip'}
+
+
+def test_a_plan_refuses_a_profile_reused_from_another_tasks_run(tmp_path):
+    from cnr_mission.core.task import load_plan
+    from cnr_params import ConfigError
+    path = tmp_path / 'plan.yaml'
+    path.write_text("""task: corridor_long
+location: corridor
+settle: 6.0
+runs:
+- {id: a, condition: c1, force: onload, decide: true, learn: false, explore: false, reuse_profile: false}
+- {id: b, condition: c1, force: offload, decide: true, learn: false, explore: false, reuse_profile: true,
+   task: corridor_round_trip}
+""")
+    with pytest.raises(ConfigError, match='reuse_profile'):
+        load_plan(str(path))

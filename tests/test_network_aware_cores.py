@@ -342,13 +342,19 @@ def test_a_slowdown_has_its_own_results_control_values_and_config_copy(tmp_path)
     lr = script.parse_args(['local_remote'])
     default = load_testbed(os.path.join(script.report.WS, 'config', 'testbed.yaml')).robot_cpu.slowdown
     assert lr.slowdowns == [default, 2 * default] and lr.out.endswith('docs/results/local_remote')
-    cfg = script.slowdown_config(str(tmp_path), 6.5)
+    from cnr_benchmarks.session import slowdown_config, task_config
+    cfg = slowdown_config(str(tmp_path), 6.5)
     assert load_testbed(os.path.join(cfg, 'testbed.yaml')).robot_cpu.cpus == pytest.approx(1 / 6.5)
     assert os.path.exists(os.path.join(cfg, 'migration.yaml'))
-    other = script.slowdown_config(str(tmp_path / 'b'), 2.0, cfg)          # from another copy (bench_migration)
+    other = slowdown_config(str(tmp_path / 'b'), 2.0, cfg)          # from another copy (bench_migration)
     assert load_testbed(os.path.join(other, 'testbed.yaml')).robot_cpu.cpus == pytest.approx(0.5)
-    assert script.slowdown_config(str(tmp_path), 6.5, cfg) == cfg          # a copy given as its own source: kept
+    assert slowdown_config(str(tmp_path), 6.5, cfg) == cfg          # a copy given as its own source: kept
     assert os.path.exists(os.path.join(cfg, 'migration.yaml'))
+    tasks = task_config(str(tmp_path / 't'))            # the task experiments' copy: the overlay set in it
+    with open(os.path.join(tasks, 'migration.yaml')) as f:
+        assert yaml.safe_load(f)['dormant'] == {'move_base': ['robot', 'cloud']}
+    assert load_testbed(os.path.join(task_config(str(tmp_path / 't'), 6.5), 'testbed.yaml')).robot_cpu.cpus == \
+        pytest.approx(1 / 6.5)
     from cnr_benchmarks import migration_bench
     assert migration_bench.main(['--slowdown', '0.5', '--out', str(tmp_path / 'm')]) == 2
     with pytest.raises(SystemExit):

@@ -25,7 +25,7 @@ def params(workspace, **changes):
 @pytest.fixture(scope='module')
 def monitors(ros, workspace):
     port = free_port()
-    common = dict(peer_address='127.0.0.1', echo_rate=10.0, publish_rate=5.0, probe_interval=0.0,
+    common = dict(peer_address='127.0.0.1', echo_rate=10.0, publish_rate=5.0, probe_interval=0.0, probe_method='iperf3',
                   probe_seconds=1, probe_omit=0, probe_bytes=2000000, probe_timeout=5.0)
     ros.master.call('setParam', '/nm_robot', params(workspace, name='robot', peer='cloud', iperf3_server=False,
                                                     probe_port=port, **common))

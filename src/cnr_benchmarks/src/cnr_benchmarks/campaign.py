@@ -33,6 +33,9 @@ alternating, on the unrestricted link, at each robot CPU slowdown of ``--slowdow
 CPU frequencies); the page README.md and the two figures. ``--slowdown S`` runs control or campaign with the robot
 capped at 1/S CPU: on a copy of config/ in ``<scratch>/slowdown_<S>`` whose testbed.yaml says so.
 
+All three run on a copy of config/ in the scratch with config/task_experiments.yaml's values set (move_base also
+dormant on the cloud: an offload wakes it instead of starting a clone).
+
 ``<out>``: the page and its rows, default docs/results/<experiment>/; ``<scratch>``: the sessions' logs,
 plans, runs and training sets, bench_results/<experiment>/ (with ``--out``: the same folder).
 """
@@ -52,7 +55,7 @@ import yaml
 from cnr_benchmarks import cli, report, results
 from cnr_benchmarks.campaign_figures import COMMAND_FILE, write_analysis, write_local_remote
 from cnr_benchmarks.core import campaign as core
-from cnr_benchmarks.session import run_session, slowdown_config, slowdown_dir, testbed_running, two_host_argv
+from cnr_benchmarks.session import run_session, slowdown_dir, task_config, testbed_running, two_host_argv
 from cnr_params.files import write_atomic
 
 THESIS_CT, THESIS_CT_SD = 87.9286, 14.3815          # s, Table 4-5
@@ -83,11 +86,11 @@ all-local runs of a results TSV, e.g. the onload runs of exp_local_remote.sh
 CAMPAIGN_DOC = """The continuous experiment of thesis §5.
 
     launch_scripts/exp_campaign.sh [--conditions 100] [--seed 1] [--out DIR] [--test-fraction 0.3]
-                                   [--held-out-repeats 2] [--rtt-min 0 --rtt-max 200 --rate-min 0.5 --rate-max 50 --loss-min 0
-                                    --loss-max 0.05] [--settle 6] [--port 11411] [--slowdown S]
+                                   [--held-out-repeats 2] [--rtt-min 0 --rtt-max 250 --rate-min 0.5 --rate-max 50 --loss-min 0
+                                    --loss-max 0.1] [--settle 6] [--port 11411] [--slowdown S] [--task T1[,T2...]]
     launch_scripts/exp_campaign.sh --analyse-only [--out DIR] [--exclude c0017,...]
 
---conditions link conditions (default 100; RTT 0-200 ms, rate 0.5-50 Mbit/s log-uniform, loss 0-5 %, drawn with
+--conditions link conditions (default 100; RTT 0-250 ms, rate 0.5-50 Mbit/s log-uniform, loss 0-10 %, drawn with
 --seed) on the two-host testbed, each profiled once with move_base on the robot and decided by network_monitor's
 migration_decider (k-NN), then run onload and offload on that profile; both runs evaluated (Eq. 4-5) and learned from
 an empty training set. Then the analysis: the decisions against the oracle of the paired runs, the learning curve
@@ -102,6 +105,9 @@ with the control values of exp_control.sh --slowdown S.
 --held-out-repeats R: a learning plan instead of pairs: each training condition is run once, in the placement the
 robot's policy chooses (with exploration), and learned, as a robot in service learns; each held-out condition (ids
 h0071, ...) R times per placement, never learned, for the noise-aware oracle's repeats.
+--task T1,T2: several tasks of the location in one session, the conditions dealt to them in turn (each task's last
+--test-fraction held out), each learned per <task, location> (thesis §4.2.5); Figures 5-1 to 5-6 show T1's runs,
+campaign_summary.json every task's. Each task's training set is copied beside the rows after the session.
 --analyse-only: the analysis and figures of the rows so far (--exclude: conditions left out, named on the page).
 """
 
@@ -243,7 +249,7 @@ def local_remote(args: argparse.Namespace) -> int:
         plan = core.local_remote_plan(args.task, args.location, args.settle, args.runs)
         os.makedirs(out, exist_ok=True)
         rc = run_session(args, plan, os.path.join(out, 'results.tsv'), os.path.join(scratch, 'training'),
-                         args.control_values, scratch=scratch, cfg_dir=slowdown_config(args.scratch, s))
+                         args.control_values, scratch=scratch, cfg_dir=task_config(args.scratch, s))
         if rc != 0:
             print(f'exp_local_remote: the session at slowdown {s:g} ended with status {rc}; run the same command '
                   f'again to resume', file=sys.stderr)
@@ -254,7 +260,7 @@ def local_remote(args: argparse.Namespace) -> int:
 # ---------------------------------------------------------------- campaign
 def campaign(args: argparse.Namespace) -> int:
     ranges = core.Ranges(args.rtt_min, args.rtt_max, args.rate_min, args.rate_max, args.loss_min, args.loss_max)
-    conditions = core.draw_conditions(args.conditions, args.seed, ranges)
+    conditions = core.assign_tasks(core.draw_conditions(args.conditions, args.seed, ranges), args.tasks)
     if args.held_out_repeats:
         plan = core.learning_plan_document(args.task, args.location, args.settle,
                                            core.learning_split(conditions, args.test_fraction), args.held_out_repeats)
@@ -267,7 +273,20 @@ def campaign(args: argparse.Namespace) -> int:
     t0 = time.monotonic()
     rc = run_session(args, plan, rows_path, os.path.join(args.scratch, 'training'), args.control_values)
     report.progress(f'[campaign] session ended with status {rc} after {(time.monotonic() - t0) / 60:.1f} min')
+    publish_training_sets(args)
     return analyse(args) or rc
+
+
+def publish_training_sets(args: argparse.Namespace) -> None:
+    """Each task's training set as the robot learned it, copied beside the rows (the analysis reads it there when
+    the scratch is gone): training_set.tsv for the first task, training_set_<task>.tsv for the others."""
+    import shutil
+    from cnr_benchmarks.campaign_figures import published_training
+    from network_monitor.core.training import TrainingSet
+    for task in args.tasks:
+        src = TrainingSet(os.path.join(args.scratch, 'training'), task, args.location).path
+        if os.path.exists(src):
+            shutil.copyfile(src, published_training(args, task))
 
 
 def analyse(args: argparse.Namespace) -> int:
@@ -281,7 +300,10 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
     for name in ('control', 'campaign', 'analyse', 'local_remote'):
         script, doc = SCRIPTS[name]
         p = parsers[name] = sub.add_parser(name, prog=script, doc=doc)
-        p.add_argument('--task', default='corridor_round_trip', help='a task of config/decision.yaml')
+        p.add_argument('--task', default='corridor_round_trip',
+                       help='a task of config/decision.yaml' + (' (several, comma-separated: the conditions dealt '
+                                                                 'to them in turn, the first one\'s figures)'
+                                                                 if name in ('campaign', 'analyse') else ''))
         p.add_argument('--location', default='corridor', help='config/scenarios/<location>.yaml')
         p.add_argument('--out', default=None, help="the page's folder (default docs/results/control/<task>@<location>"
                                                    ", docs/results/campaign[_slowdown<S>], docs/results/local_remote;"
@@ -320,13 +342,17 @@ def parse_args(argv: Optional[List[str]]) -> argparse.Namespace:
                                 'and never learned (0: every condition paired and learned)')
             p.add_argument('--exclude', default='', help='conditions left out of the analysis (comma-separated '
                                                          'ids, e.g. runs known to be corrupted; the page says so)')
-            for k, v in (('rtt-min', 0.0), ('rtt-max', 200.0), ('rate-min', 0.5), ('rate-max', 50.0),
-                         ('loss-min', 0.0), ('loss-max', 0.05)):
+            for k, v in (('rtt-min', 0.0), ('rtt-max', 250.0), ('rate-min', 0.5), ('rate-max', 50.0),
+                         ('loss-min', 0.0), ('loss-max', 0.10)):
                 p.add_argument(f'--{k}', type=float, default=v)
     args, extra = ap.parse_known_args(argv)
     ap = parsers[args.cmd]              # errors from here on name the script
     if extra:
         ap.error(f'unrecognized arguments: {" ".join(extra)}')
+    args.tasks = [t for t in args.task.split(',') if t]
+    if not args.tasks or (len(args.tasks) > 1 and args.cmd not in ('campaign', 'analyse')):
+        ap.error(f'--task: expected one task, got {args.task!r}')
+    args.task = args.tasks[0]           # the one whose runs the figures show
     args.argv = list(argv if argv is not None else sys.argv[1:])
     args.argv.remove(args.cmd)          # the script's own arguments (the subcommand is the script's choice)
     if args.cmd == 'analyse':
@@ -372,10 +398,10 @@ def main(argv: Optional[List[str]] = None) -> int:
     runs_nothing = args.cmd == 'analyse' or (args.cmd == 'control' and getattr(args, 'from_rows', None))
     if not runs_nothing:
         cli.require_root(SCRIPTS[args.cmd][0], "the testbed's network namespaces, TUN devices and CPU cgroup")
-    if args.cmd in ('control', 'campaign') and args.slowdown is not None and not runs_nothing:
-        if testbed_running(f'exp_{args.cmd}'):
+    if args.cmd in ('control', 'campaign') and not runs_nothing:
+        if args.slowdown is not None and testbed_running(f'exp_{args.cmd}'):
             return 2
-        args.cfg_dir = slowdown_config(args.scratch, args.slowdown)
+        args.cfg_dir = task_config(args.scratch, args.slowdown)    # config/task_experiments.yaml's copy
     return {'control': control, 'campaign': campaign, 'analyse': analyse,
             'local_remote': local_remote}[args.cmd](args)
 

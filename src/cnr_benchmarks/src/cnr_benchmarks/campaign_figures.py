@@ -64,8 +64,9 @@ FIGURE_SIZE = (6.4, 4.8)
 class Analysis:
     """A campaign's rows read and paired, judged by the oracles, with the learning curves of its training rows."""
     args: argparse.Namespace
-    rows: List[Dict[str, str]]          # the rows analysed (--exclude left out)
+    rows: List[Dict[str, str]]          # the rows analysed: the first task's (--exclude left out)
     all_rows: List[Dict[str, str]]      # every row
+    task_rows: List[Dict[str, str]]     # the rows analysed of every task (the decision's measures)
     excluded: List[str]
     decision: Any                       # config/decision.yaml's decision section
     control: Any                        # the control values (CT, CB)
@@ -114,7 +115,8 @@ def load_analysis(args: argparse.Namespace) -> Union[Analysis, int]:
     if unknown:
         print(f'campaign analyse: --exclude: no such condition in {rows_path}: {", ".join(unknown)}', file=sys.stderr)
         return 2
-    all_rows, rows = rows, [r for r in rows if r['condition'] not in excluded]
+    all_rows, task_rows = rows, [r for r in rows if r['condition'] not in excluded]
+    rows = [r for r in task_rows if (r['task'] or args.task) == args.task]
     if not rows:
         print(f'campaign analyse: no results in {rows_path}', file=sys.stderr)
         return 1
@@ -145,18 +147,24 @@ def load_analysis(args: argparse.Namespace) -> Union[Analysis, int]:
     # the same with one row per training pair labelled by the pair's (strict) oracle (core.paired_rows)
     paired = core.paired_rows(pairs[:n_train], oracle[:n_train])
     curve_p = _learning_curve(paired, n_train, pairs, oracle, oracle_noise, cfg.decision, n_train)
-    return Analysis(args, rows, all_rows, excluded, cfg.decision, control, learned, tw, pairs, oracle, oracle_noise,
+    return Analysis(args, rows, all_rows, task_rows, excluded, cfg.decision, control, learned, tw, pairs, oracle, oracle_noise,
                     tolerance, n_train, n_test, len(trained_on), curve, curve_p)
+
+
+def published_training(args: argparse.Namespace, task: str) -> str:
+    """Where a task's training set is published beside the rows: ``<out>/training_set.tsv`` for the campaign's
+    first task, ``<out>/training_set_<task>.tsv`` for another."""
+    name = TRAINING_FILE if task == args.task else TRAINING_FILE.replace('.tsv', f'_{task}.tsv')
+    return os.path.join(args.out, name)
 
 
 def read_training(args: argparse.Namespace, task: str) -> Tuple[List[Any], List[str]]:
     """The robot's training set of ⟨task, --location⟩ in the scratch (``<scratch>/training``), or without it the one
-    published beside the rows (``<out>/training_set.tsv``, the campaign's own task only): rows and warnings."""
+    published beside the rows (:func:`published_training`): rows and warnings."""
     from network_monitor.core.training import TrainingSet, read_rows
     path = TrainingSet(os.path.join(args.scratch, 'training'), task, args.location).path
-    published = os.path.join(args.out, TRAINING_FILE)
-    if not os.path.exists(path) and task == args.task and os.path.exists(published):
-        path = published
+    if not os.path.exists(path) and os.path.exists(published_training(args, task)):
+        path = published_training(args, task)
     return read_rows(path)
 
 
@@ -489,7 +497,7 @@ def decision_measures(a: Analysis, crossings: Crossings, good: Sequence[Any]) ->
     rows with control values, the robot's rows of the training conditions, the figures' numbers."""
     from cnr_params import ConfigError
     from network_monitor.core.evaluation import load_control_values
-    ts = dm.trials(a.rows, a.args.task)
+    ts = dm.trials(a.task_rows, a.args.task)
     controls = {a.args.task: a.control}
     learned = list(a.learned)
     for task in dm.tasks_of(ts):
@@ -500,8 +508,8 @@ def decision_measures(a: Analysis, crossings: Crossings, good: Sequence[Any]) ->
                 print(f'campaign analyse: {exc}: its conditions left out of {SUMMARY_FILE}', file=sys.stderr)
                 continue
             learned += [t for t in read_training(a.args, task)[0] if t.source == 'local']
-    trained_on = dm.training_keys(a.rows, ts, a.args.test_fraction, a.args.task)
-    train_rows = dm.learned_during(learned, a.rows, set(trained_on), a.args.task)
+    trained_on = dm.training_keys(a.task_rows, ts, a.args.test_fraction, a.args.task)
+    train_rows = dm.learned_during(learned, a.task_rows, set(trained_on), a.args.task)
     elapsed = core.elapsed_time(a.all_rows)
     figures = dm.Figures(crossings.r_bw, crossings.r_bw_with_migration, crossings.rtt, crossings.fail_rtt,
                          dm.change_pct([p.onload.t_task for p in good], [p.offload.t_task for p in good]),

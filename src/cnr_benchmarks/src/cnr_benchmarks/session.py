@@ -54,22 +54,53 @@ def slowdown_dir(out: str, slowdown: float) -> str:
     return os.path.join(out, f'slowdown_{slowdown:g}')
 
 
-def slowdown_config(out: str, slowdown: float, src: Optional[str] = None) -> str:
-    """A copy of ``src`` (default the workspace's config/) whose testbed.yaml caps the robot at 1/``slowdown`` CPU
-    (the thesis's "different local CPU frequency"); rewritten on every run so it follows the configuration."""
+def copy_config(dst: str, src: Optional[str] = None) -> str:
+    """``dst``, a fresh copy of ``src`` (default the workspace's config/); a copy given as its own source is kept."""
     import shutil
-    dst = os.path.join(slowdown_dir(out, slowdown), 'config')
     src = os.path.abspath(src or os.path.join(report.WS, 'config'))
-    if src != os.path.abspath(dst):          # (a copy made before is only updated)
+    if src != os.path.abspath(dst):
         if os.path.exists(dst):
             shutil.rmtree(dst)
         shutil.copytree(src, dst)
+    return dst
+
+
+def slowdown_config(out: str, slowdown: float, src: Optional[str] = None) -> str:
+    """A copy of ``src`` (default the workspace's config/) whose testbed.yaml caps the robot at 1/``slowdown`` CPU
+    (the thesis's "different local CPU frequency"); rewritten on every run so it follows the configuration."""
+    dst = copy_config(os.path.join(slowdown_dir(out, slowdown), 'config'), src)
     path = os.path.join(dst, 'testbed.yaml')
     with open(path) as f:
         doc = yaml.safe_load(f)
     doc['testbed']['robot_cpu'].update(enabled=True, slowdown=slowdown)
-    with open(path, 'w') as f:
-        yaml.safe_dump(doc, f, sort_keys=False)
+    write_atomic(path, yaml.safe_dump(doc, sort_keys=False))
+    return dst
+
+
+TASK_OVERLAY = 'task_experiments.yaml'      # in config/: what the task experiments change in their copy
+
+
+def task_config(scratch: str, slowdown: Optional[float] = None) -> str:
+    """The configuration the task experiments (control, campaign, local vs remote) run on: a copy of config/ in
+    ``<scratch>/config`` (with ``slowdown``: :func:`slowdown_config`'s) with config/task_experiments.yaml's values
+    set in the files it names (ConfigError naming the file and field for a file or key that is not there)."""
+    from cnr_params import ConfigError
+    dst = (slowdown_config(scratch, slowdown) if slowdown is not None else
+           copy_config(os.path.join(scratch, 'config')))
+    overlay_path = os.path.join(report.WS, 'config', TASK_OVERLAY)
+    with open(overlay_path) as f:
+        overlay = yaml.safe_load(f) or {}
+    for name, values in overlay.items():
+        path = os.path.join(dst, str(name))
+        if not isinstance(values, dict) or not os.path.exists(path):
+            raise ConfigError(overlay_path, str(name), 'expected a file of config/ with the values to set in it')
+        with open(path) as f:
+            doc = yaml.safe_load(f) or {}
+        missing = [k for k in values if k not in doc]
+        if missing:
+            raise ConfigError(overlay_path, f'{name}.{missing[0]}', f'no such key in config/{name}')
+        doc.update(values)
+        write_atomic(path, yaml.safe_dump(doc, sort_keys=False))
     return dst
 
 

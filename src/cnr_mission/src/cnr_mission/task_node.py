@@ -49,7 +49,9 @@ class TaskRunner:
     def __init__(self) -> None:
         p = private_section('~')
         self.plan = load_plan(p.string('plan'))
-        self.spec = load_task(Section.from_file(p.string('scenario_file')), self.plan.task)
+        scenario = Section.from_file(p.string('scenario_file'))
+        self.specs = {task: load_task(scenario, task) for task in self.plan.tasks}
+        self.spec = self.specs[self.plan.task_of(self.plan.runs[0])]     # the current run's task
         self.results = os.path.abspath(p.string('results'))
         testbed = p.string('testbed_config')
         self.testbed = None
@@ -160,7 +162,9 @@ class TaskRunner:
 
     def run(self, i: int, n: int, r: RunSpec) -> Dict:
         force = resolve_force(r.force, self.decided.get(r.condition))
-        row: Dict = dict(id=r.id, condition=r.condition, force=force, wall_start=round(time.time(), 3))
+        task = self.plan.task_of(r)
+        self.spec = self.specs[task]
+        row: Dict = dict(id=r.id, condition=r.condition, task=task, force=force, wall_start=round(time.time(), 3))
         w0 = time.monotonic()
         if r.link is not None:
             row.update(rtt_ms=r.link.rtt_ms, rate_mbit=r.link.rate, loss=r.link.loss)
@@ -169,7 +173,7 @@ class TaskRunner:
             self.testbed.set('both', delay=r.link.delay, rate=r.link.rate, loss=r.link.loss)
         link = '' if r.link is None else \
             f'RTT {r.link.rtt_ms:.0f} ms, {r.link.rate:g} Mbit/s, loss {100 * r.link.loss:.1f} %'
-        self.say(f'run {i}/{n} {r.id}: {link or "link as it is"}'
+        self.say(f'run {i}/{n} {r.id} ({task}): {link or "link as it is"}'
                  + (f'; placement forced: {force}' if force else ''))
         # a new link: the monitor's window fills with it before the profile (the decider waits, after bringing
         # the modules home if it does; without a decision the runner waits)
@@ -189,7 +193,7 @@ class TaskRunner:
         placing = t_decision = decided_at = 0.0
         if r.decide:
             self.decide.wait_for_service(self.decide_timeout)
-            d = self.decide(task=self.plan.task, location=self.plan.location, force=FORCE[force], probe=True,
+            d = self.decide(task=task, location=self.plan.location, force=FORCE[force], probe=True,
                             explore=r.explore, settle=settle, reuse_profile=r.reuse_profile)
             if not d.ok:
                 raise RuntimeError(f'the decider refused: {d.message}')
@@ -243,7 +247,7 @@ class TaskRunner:
         self.decided: Dict[str, str] = {row['condition']: row['decision'] for row in rows if row['decision']}
         todo = [r for r in self.plan.runs if r.id not in done]
         n = len(self.plan.runs)
-        self.say(f'{self.plan.task}@{self.plan.location}: {n} runs in the plan, {n - len(todo)} already done; '
+        self.say(f'{"+".join(self.plan.tasks)}@{self.plan.location}: {n} runs in the plan, {n - len(todo)} already done; '
                  f'results in {self.results}')
         for r in todo:
             if rospy.is_shutdown():

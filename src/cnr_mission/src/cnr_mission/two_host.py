@@ -522,10 +522,12 @@ def task_mode(args: TwoHostOptions) -> Optional[TaskMode]:
         raise ConfigError('two_host_mission', '--task-results', 'required with --task-plan')
     plan = load_plan(args.task_plan)
     cfg = load_decision_config(os.path.join(args.config_dir, 'decision.yaml'))
-    if plan.task not in cfg.tasks:
-        raise ConfigError(args.task_plan, 'task', f'{plan.task!r} is not a task of config/decision.yaml '
-                                                  f'({", ".join(cfg.tasks)})')
-    return TaskMode(os.path.abspath(args.task_plan), os.path.abspath(args.task_results), list(cfg.tasks[plan.task]),
+    for task in plan.tasks:
+        if task not in cfg.tasks:
+            raise ConfigError(args.task_plan, 'task', f'{task!r} is not a task of config/decision.yaml '
+                                                      f'({", ".join(cfg.tasks)})')
+    modules = list(dict.fromkeys(m for task in plan.tasks for m in cfg.tasks[task]))   # every task's
+    return TaskMode(os.path.abspath(args.task_plan), os.path.abspath(args.task_results), modules,
                     os.path.abspath(args.training_dir) if args.training_dir else '',
                     os.path.abspath(args.control_values) if args.control_values else '')
 

@@ -58,6 +58,7 @@ class Condition:
     rtt_ms: float
     rate: float             # Mbit/s
     loss: float             # 0..1
+    task: str = ''          # the task run under it ('' = the plan's)
 
 
 def draw_conditions(n: int, seed: int, r: Ranges, first: int = 1) -> List[Condition]:
@@ -73,6 +74,14 @@ def draw_conditions(n: int, seed: int, r: Ranges, first: int = 1) -> List[Condit
     return out
 
 
+def assign_tasks(conditions: Sequence[Condition], tasks: Sequence[str]) -> List[Condition]:
+    """The conditions dealt to the tasks in turn (the first to ``tasks[0]``, the second to ``tasks[1]``, ...), so
+    every task meets conditions from the whole ranges and a session alternates its tasks; one task: unchanged."""
+    if len(tasks) < 2:
+        return list(conditions)
+    return [Condition(c.id, c.rtt_ms, c.rate, c.loss, tasks[i % len(tasks)]) for i, c in enumerate(conditions)]
+
+
 def plan_document(task: str, location: str, settle: float, conditions: Sequence[Condition]) -> Dict:
     """The task_runner's plan: per condition an onload run on a new profile, then an offload run on the same
     profile (module docstring)."""
@@ -81,7 +90,7 @@ def plan_document(task: str, location: str, settle: float, conditions: Sequence[
         link = dict(delay=c.rtt_ms / 2.0, rate=c.rate, loss=c.loss)
         for placement, reuse in ((ONLOAD, False), (OFFLOAD, True)):
             runs.append(dict(id=f'{c.id}-{placement}', condition=c.id, link=link, force=placement, decide=True,
-                             learn=True, explore=False, reuse_profile=reuse))
+                             learn=True, explore=False, reuse_profile=reuse, **(dict(task=c.task) if c.task else {})))
     return dict(task=task, location=location, settle=settle, runs=runs)
 
 
@@ -94,11 +103,14 @@ def held_out(condition: str) -> bool:
 
 
 def learning_split(conditions: Sequence[Condition], test_fraction: float) -> List[Condition]:
-    """The conditions with the last ``round(n * test_fraction)`` renamed held-out (``c0071`` -> ``h0071``)."""
-    n_test = int(round(len(conditions) * test_fraction))
-    n_train = len(conditions) - n_test
-    return [c if i < n_train else Condition(HELD_OUT_PREFIX + c.id[1:], c.rtt_ms, c.rate, c.loss)
-            for i, c in enumerate(conditions)]
+    """The conditions with the last ``round(n * test_fraction)`` of each task's renamed held-out (``c0071`` ->
+    ``h0071``)."""
+    held = set()
+    for task in dict.fromkeys(c.task for c in conditions):
+        mine = [c.id for c in conditions if c.task == task]
+        held.update(mine[len(mine) - int(round(len(mine) * test_fraction)):])
+    return [Condition(HELD_OUT_PREFIX + c.id[1:], c.rtt_ms, c.rate, c.loss, c.task) if c.id in held else c
+            for c in conditions]
 
 
 def learning_plan_document(task: str, location: str, settle: float, conditions: Sequence[Condition],
@@ -112,15 +124,16 @@ def learning_plan_document(task: str, location: str, settle: float, conditions: 
     runs = []
     for c in conditions:
         link = dict(delay=c.rtt_ms / 2.0, rate=c.rate, loss=c.loss)
+        mine = dict(task=c.task) if c.task else {}          # (a condition's task: several tasks in one plan)
         if not held_out(c.id):
             runs.append(dict(id=f'{c.id}-policy', condition=c.id, link=link, force='', decide=True, learn=True,
-                             explore=True, reuse_profile=False))
+                             explore=True, reuse_profile=False, **mine))
             continue
         for i in range(1, repeats + 1):
             for placement in (ONLOAD, OFFLOAD):
                 runs.append(dict(id=f'{c.id}-{placement}-{i}', condition=c.id, link=link, force=placement,
                                  decide=True, learn=False, explore=False, reuse_profile=bool(runs) and
-                                 runs[-1]['condition'] == c.id))
+                                 runs[-1]['condition'] == c.id, **mine))
     return dict(task=task, location=location, settle=settle, runs=runs)
 
 

@@ -18,7 +18,8 @@ and what to decide (``force``: '' = the migration_decider decides, offload | onl
 ``other`` = the other placement than the previous run of the same condition ran, for paired runs;
 ``decide: false`` = no decider at all, e.g. the control runs; ``learn``: append the evaluated row to the
 training set; ``explore``: the decision may explore; ``reuse_profile``: decide on the previous run's profile,
-e.g. the second run of a pair under the same link). Results are appended to a TSV, one row per run,
+e.g. the second run of a pair under the same link; ``task``: this run's task, default the plan's ``task``, so one
+session can alternate tasks). Results are appended to a TSV, one row per run, its task in the ``task`` column,
 so a plan that was interrupted resumes after its last finished run (:func:`read_results`).
 
 B_task is the robot computer's battery (the netbook's pack, as the thesis read BAT0); ``b_base`` beside it in a
@@ -148,6 +149,7 @@ class RunSpec:
     learn: bool             # the decider appends the evaluated row to the training set
     explore: bool           # the decision may explore (False: the k-NN's or the rule's choice)
     reuse_profile: bool     # decide on the previous run's profile (paired runs under one link)
+    task: str = ''          # this run's task ('' = the plan's)
 
 
 @dataclass(frozen=True)
@@ -156,6 +158,15 @@ class Plan:
     location: str
     settle: float           # s after setting the link before profiling (the monitor's window fills)
     runs: Tuple[RunSpec, ...]
+
+    def task_of(self, run: RunSpec) -> str:
+        """The task a run of this plan runs."""
+        return run.task or self.task
+
+    @property
+    def tasks(self) -> List[str]:
+        """Every task the plan runs, in order of its first run."""
+        return list(dict.fromkeys(self.task_of(r) for r in self.runs))
 
 
 def _link(s: Section) -> Link:
@@ -179,9 +190,12 @@ def load_plan(path: str) -> Plan:
         if force == OTHER and not any(x.condition == r.raw('condition', None) for x in runs):
             raise r.error('force', 'other needs an earlier run of the same condition')
         link = _link(r.section('link')) if r.raw('link', None) is not None else None
+        task = r.string('task') if r.raw('task', None) is not None else ''
+        if r.boolean('reuse_profile') and runs and runs[-1].task != task:
+            raise r.error('reuse_profile', 'the previous run is of another task')
         runs.append(RunSpec(id=rid, condition=r.string('condition'), link=link, force=force,
                             decide=r.boolean('decide'), learn=r.boolean('learn'), explore=r.boolean('explore'),
-                            reuse_profile=r.boolean('reuse_profile')))
+                            reuse_profile=r.boolean('reuse_profile'), task=task))
     if not runs:
         raise s.error('runs', 'expected at least one run')
     return Plan(task=s.string('task'), location=s.string('location'), settle=s.number('settle', nonnegative=True),
@@ -191,9 +205,9 @@ def load_plan(path: str) -> Plan:
 RESULT_COLUMNS = ('id', 'condition', 'rtt_ms', 'rate_mbit', 'loss', 'force', 'decision', 'reason', 'policy',
                   'confidence', 'votes_offload', 'c_l', 'r_bw', 'profile_method', 'placed', 'placing_time',
                   'redecisions', 'placement', 'mission_status', 't_task', 'b_task', 'b_base', 't_decision',
-                  'b_decision', 'value', 'good', 'label', 'learned', 'wall_start', 'wall_time')
+                  'b_decision', 'value', 'good', 'label', 'learned', 'wall_start', 'wall_time', 'task')
 #: columns a results file made before them lacks: read as '', appended to in the file's own columns
-LATER_COLUMNS = ('b_base', 't_decision', 'b_decision')
+LATER_COLUMNS = ('b_base', 't_decision', 'b_decision', 'task')
 #: the columns of a results file that records one battery pack and the task alone
 RESULT_COLUMNS_ONE_PACK = tuple(c for c in RESULT_COLUMNS if c not in LATER_COLUMNS)
 
