@@ -79,9 +79,12 @@ def test_a_good_link_offloads_and_a_bad_one_onloads_by_knn(tmp_path):
         # the paired run of the campaign: the same link, the other placement, decided on the same profile
         dict(id='bad-offload', condition='bad', link=dict(delay=150.0, rate=0.0, loss=0.0), force=OFFLOAD,
              decide=True, learn=True, explore=False, reuse_profile=True)])
-    out, rows = run_session(tmp_path, plan, os.path.join(WS, 'config'), training, control,
+    # the task experiments' configuration (config/task_experiments.yaml: move_base dormant on the cloud too)
+    from cnr_benchmarks.session import task_config
+    out, rows = run_session(tmp_path, plan, task_config(str(tmp_path / 'scratch')), training, control,
                             'network_aware_testbed.log')
     assert [r['id'] for r in rows] == ['good', 'bad', 'bad-offload'], out[-3000:]
+    assert {r['task'] for r in rows} == {TASK}
     good, bad, paired = rows
     # good link: the k-NN (5 offload neighbours) offloads, move_base migrates to the cloud and drives from there
     assert (good['decision'], good['reason'], good['placed']) == (OFFLOAD, 'knn', '1'), good
@@ -93,8 +96,9 @@ def test_a_good_link_offloads_and_a_bad_one_onloads_by_knn(tmp_path):
     assert float(bad['c_l']) > 0.25
     # move_base was brought home before the profile (decider.profile_at_home), so placing it was no migration
     assert float(bad['placing_time']) < 1.0, bad
-    # ... by waking the robot's instance the offload had put to sleep (config/migration.yaml dormant), not a clone
-    assert 'woke the dormant instance on robot' in out, out[-3000:]
+    # ... by waking the robot's instance the offload had put to sleep (config/migration.yaml dormant), not a clone,
+    # and the paired offload woke the cloud's instance that this onload had put to sleep
+    assert 'woke the dormant instance on robot' in out and 'woke the dormant instance on cloud' in out, out[-3000:]
     # the paired run: forced offload on the previous profile (nothing measured again), the policy recorded
     assert (paired['decision'], paired['reason'], paired['policy']) == (OFFLOAD, 'forced', ONLOAD), paired
     assert (paired['c_l'], paired['r_bw']) == (bad['c_l'], bad['r_bw']) and paired['placement'] == 'move_base=cloud'

@@ -347,7 +347,11 @@ def summary_text(a: Analysis) -> str:
     for r in rows:
         statuses[(r['decision'], r['mission_status'])] = statuses.get((r['decision'], r['mission_status']), 0) + 1
     either = sum(1 for o in a.oracle_noise if o == core.EITHER)
-    return '\n'.join([
+    tasks = getattr(a.args, 'tasks', [a.args.task])
+    several = (f'Tasks {", ".join(tasks)}, the conditions dealt to them in turn, each learned per ⟨task, location⟩: '
+               f'this paragraph, the accuracy table, the thesis\'s figures and Figures 5-1 to 5-6 are {a.args.task}\'s '
+               f'runs, the summary below every task\'s.\n' if len(tasks) > 1 else '')
+    return several + '\n'.join([
         f'{_command(a.args)}: {len(rows)} runs, '
         + (f'{a.trained_on} training conditions run once each in the placement the robot chose, {a.n_test} held-out '
            f'conditions with both placements repeated' if learning else
