@@ -8,7 +8,8 @@ k-NN, placement; or the previous run's profile with ``reuse_profile``), drive th
 move_base's action, measure T_task (sim time) and B_task (the robot computer's battery, ``battery_topic``; the
 base's, ``base_battery_topic``, recorded beside it as ``b_base``), both from the placement on (its cost is the
 task's; the whole decision's, profile and placement, beside them: :mod:`cnr_mission.core.task`), ``~evaluate``,
-append the row to the results file. A plan that was interrupted resumes after the last run with a row.
+append the row to the results file. A plan that was interrupted resumes after the last run with a row. Before a
+session's first run the task is driven ``warmup_runs`` times, not recorded (the nodes still starting).
 
 Exit status: 0 every run done, 2 bad configuration, 1 anything else.
 """
@@ -62,6 +63,7 @@ class TaskRunner:
         self.goal_ack_timeout = p.number('goal_ack_timeout', positive=True)
         self.last_sent = 0.0                        # wall time the current goal was (last) sent
         self.decide_timeout = p.number('decide_timeout', positive=True)
+        self.warmup_runs = int(p.number('warmup_runs', nonnegative=True))
         decider = p.string('decider').rstrip('/')
         self.decide = rospy.ServiceProxy(f'{decider}/decide', Decide)
         self.evaluate = rospy.ServiceProxy(f'{decider}/evaluate', EvaluateTask)
@@ -239,6 +241,21 @@ class TaskRunner:
         row['wall_time'] = round(time.monotonic() - w0, 2)
         return row
 
+    def warm_up(self, task: str, k: int) -> None:
+        """Drive ``task`` once as placed, not decided and not recorded: the session's nodes are still starting
+        under the robot's CPU cap when it begins (config/task_runner.yaml ``warmup_runs``)."""
+        self.spec = self.specs[task]
+        sx, sy, sa = self.spec.start
+        self.teleport.wait_for_service(self.decide_timeout)
+        if not self.teleport(Pose2D(sx, sy, sa), False).success:
+            raise RuntimeError(f'could not put the robot at the start ({sx}, {sy})')
+        if not wait_for_server(self.client, self.decide_timeout):
+            raise RuntimeError('move_base\'s action server is not there')
+        t0 = rospy.Time.now().to_sec()
+        outcomes = self.drive()
+        self.say(f'warm-up {k}/{self.warmup_runs} ({task}, not recorded): '
+                 f'{mission_status(outcomes, len(self.spec.goals))} in {rospy.Time.now().to_sec() - t0:.1f} s')
+
     def spin(self) -> int:
         rows, warnings = read_results(self.results)
         for w in warnings:
@@ -249,6 +266,13 @@ class TaskRunner:
         n = len(self.plan.runs)
         self.say(f'{"+".join(self.plan.tasks)}@{self.plan.location}: {n} runs in the plan, {n - len(todo)} already done; '
                  f'results in {self.results}')
+        try:
+            for k in range(self.warmup_runs if todo else 0):
+                self.warm_up(self.plan.task_of(todo[0]), k + 1)
+        except (rospy.ServiceException, rospy.ROSException, RuntimeError) as exc:
+            if not rospy.is_shutdown():
+                self.say(f'warm-up failed: {exc}; the plan stops here (run it again to resume)')
+            return 1
         for r in todo:
             if rospy.is_shutdown():
                 return 1
