@@ -118,6 +118,27 @@ def test_mid_task_redecision_waits_for_the_dwell_and_respects_the_budget(tmp_pat
     assert a.finish(COMPLETED, 30.0, 0.003, 1.7e9 + 1, learn=True)[0].placement == 'move_base=cloud'
 
 
+def test_an_offloaded_modules_own_traffic_does_not_bring_it_home(tmp_path):
+    """Mid-task, with move_base on the cloud, its sensor streams are on the link: R_bw as measured falls from 124
+    at home to 7.3 (a 25 Mbit/s link, 3 Mbit/s in use), which a set profiled at home reads as a slow link; the
+    re-decision reads it as if the modules were home (r_bw_at_home) and stays. A link that really degrades
+    (a 1.2 Mbit/s link: 0.2 Mbit/s left beside the scans, now squeezed to 1 Mbit/s) still brings them home."""
+    from network_monitor.core.advisor import r_bw_at_home
+    home = dataclasses.replace(GOOD, r_bw=124.0, a_bw=24.8e6, c_bw=0.15e6)     # C_bw below the 0.2 Mbit/s floor
+    away = dataclasses.replace(GOOD, r_bw=7.3, a_bw=22.0e6, c_bw=3.0e6)
+    assert r_bw_at_home(away, home) == pytest.approx((22.0e6 + 2.85e6) / 0.2e6)
+    assert r_bw_at_home(dataclasses.replace(away, a_bw=math.nan), home) == 7.3
+    a = advisor(tmp_path, dwell=2.0, max_migrations=1, window=30.0, margin=0.8)
+    a.begin('corridor_round_trip', 'corridor', home, 0.0)                   # cold start: offload
+    assert a.running.placement == OFFLOAD
+    a.placed(0.0, 0)
+    assert all(a.observe(away, t) is None for t in (1.0, 5.0, 10.0, 40.0))  # the cold-start rule: R_bw > 10 at home
+    slow = dataclasses.replace(away, r_bw=0.2, a_bw=0.2e6, c_bw=1.0e6)     # at home: (0.2 + 0.85) / 0.2 = 5.25
+    a.observe(slow, 41.0)
+    switch = a.observe(slow, 44.0)
+    assert switch is not None and switch[0] == ONLOAD
+
+
 # ---------------------------------------------------------------- tasks and plans
 def test_the_shipped_task_and_status_rules():
     t = load_task(Section.from_file(os.path.join(WS, 'config', 'scenarios', 'corridor.yaml')), 'corridor_round_trip')

@@ -38,7 +38,7 @@ from network_monitor.core.evaluation import OFFLOAD, ONLOAD
 
 def profile_of(msg: NetworkProfile) -> Profile:
     return Profile(c_l=msg.rtt, r_bw=msg.r_bw, rtt_spread=msg.rtt_spread, loss=msg.loss,
-                   method=A_BW_METHOD_WORD[msg.a_bw_method], alive=msg.alive)
+                   method=A_BW_METHOD_WORD[msg.a_bw_method], alive=msg.alive, a_bw=msg.a_bw, c_bw=msg.c_bw)
 
 
 class DeciderNode:

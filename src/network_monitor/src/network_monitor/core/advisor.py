@@ -7,7 +7,8 @@ retrained after each row appended) and, while a task runs, a :class:`~network_mo
     begin(task, location, profile, now, force)  -> Decision and the placement to make (before the task)
     placed(now, moved, hosts)                   -> the initial migrations count in the re-decision's budget;
                                                    where the modules really are (a migration may be refused)
-    observe(profile, now)                       -> a new placement to migrate to mid-task, or None
+    observe(profile, now)                       -> a new placement to migrate to mid-task, or None (with the
+                                                   modules on the cloud, R_bw as if they were home: r_bw_at_home)
     switched(hosts)                             -> where the modules are after that migration
     finish(status, t_task, b_task, timestamp)   -> the evaluated Row (Eq. 4-5, label), appended when asked
 
@@ -28,7 +29,8 @@ from typing import Dict, List, Optional, Tuple
 
 from network_monitor.core.decision import EXPLORE, NO_PROFILE, Decider, Decision
 from network_monitor.core.decision_config import DecisionConfig
-from network_monitor.core.evaluation import (DECISIONS, ONLOAD, ControlValues, evaluate, load_control_values)
+from network_monitor.core.evaluation import (DECISIONS, OFFLOAD, ONLOAD, ControlValues, evaluate,
+                                             load_control_values)
 from network_monitor.core.hysteresis import ReDecider
 from network_monitor.core.training import LOCAL, Row
 
@@ -46,10 +48,24 @@ class Profile:
     loss: float             # 0..1, NaN if unknown
     method: str             # probe | passive | none
     alive: bool = True
+    a_bw: float = math.nan  # bit/s, NaN if unknown (R_bw's numerator)
+    c_bw: float = math.nan  # bit/s, NaN if unknown (the link's use, R_bw's denominator above its floor)
 
     @property
     def usable(self) -> bool:
         return self.alive and not (math.isnan(self.c_l) or math.isnan(self.r_bw))
+
+
+def r_bw_at_home(now: Profile, home: Profile) -> float:
+    """R_bw of a profile taken with the task's modules on the cloud, as if they were at home, where the decision's
+    profile ``home`` was taken (``profile_at_home``) and the training rows were: their own streams (an offloaded
+    move_base is sent every laser scan) are in ``now``'s C_bw and missing from its A_bw, so they are given back
+    to A_bw, and the denominator is ``home``'s (its max(C_bw, floor)); ``now.r_bw`` when either lacks a value."""
+    values = (now.a_bw, now.c_bw, home.a_bw, home.c_bw, home.r_bw)
+    if not all(math.isfinite(v) for v in values) or home.r_bw <= 0 or home.a_bw <= 0:
+        return now.r_bw
+    own = max(0.0, now.c_bw - home.c_bw)
+    return (now.a_bw + own) / (home.a_bw / home.r_bw)
 
 
 @dataclass
@@ -160,6 +176,8 @@ class TaskAdvisor:
             return None
         decider = self._deciders[(r.task, r.location)]
         c_l, r_bw = (profile.c_l, profile.r_bw) if profile.usable else (math.nan, math.nan)
+        if profile.usable and r.placement == OFFLOAD:
+            r_bw = r_bw_at_home(profile, r.profile)     # comparable with the decision's and the rows' profiles
         d = decider.policy(c_l, r_bw)
         switch = r.redecider.update(now, d.decision, 1.0 if d.reason == NO_PROFILE else d.confidence)
         if switch is None:
