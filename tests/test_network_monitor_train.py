@@ -186,7 +186,7 @@ def test_nobody_listening_or_no_such_host_fails_without_raising():
 def test_the_train_parameters_are_validated(workspace):
     path = f'{workspace}/config/network_monitor.yaml'
     cfg = monitor_config.from_section(Section.from_file(path))
-    assert cfg.probe_method == 'iperf3' and not cfg.train_server
+    assert cfg.probe_method == 'train' and not cfg.train_server          # the responder runs on the peer
     assert (cfg.train.packets, cfg.train.packet_bytes, cfg.train.gap, cfg.train.timeout) == (60, 1472, 0.5, 8.0)
     assert (cfg.train_port, cfg.train_server_port) == (5202, 5202)
     for key in ('probe_method', 'train_packets', 'train_packet_bytes', 'train_gap', 'train_port', 'train_server',
