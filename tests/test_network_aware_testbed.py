@@ -166,7 +166,13 @@ def test_a_decision_asked_before_the_cloud_is_heard_waits_for_the_link(tmp_path)
     trace.write_text('time\tdirection\tdelay\trate\toutage\n0\tboth\t1\t0\ttrue\n15\tboth\t\t\tfalse\n')
     plan = dict(task=TASK, location=LOCATION, settle=6.0, runs=[
         dict(id='late', condition='late', force='', decide=True, learn=False, explore=False, reuse_profile=False)])
-    out, rows = run_session(tmp_path, plan, os.path.join(WS, 'config'), training, control,
+    config = str(tmp_path / 'config')           # no warm-up drive: the decision is asked while the link is cut
+    shutil.copytree(os.path.join(WS, 'config'), config)
+    with open(os.path.join(config, 'task_runner.yaml')) as f:
+        runner = yaml.safe_load(f)
+    with open(os.path.join(config, 'task_runner.yaml'), 'w') as f:
+        yaml.safe_dump(dict(runner, warmup_runs=0), f)
+    out, rows = run_session(tmp_path, plan, config, training, control,
                             'network_aware_late_link.log', '--trace', str(trace))
     assert [r['id'] for r in rows] == ['late'], out[-3000:]
     row = rows[0]
