@@ -436,3 +436,54 @@ runs:
 """)
     with pytest.raises(ConfigError, match='reuse_profile'):
         load_plan(str(path))
+
+
+def test_the_analysis_of_a_two_task_learning_plan(tmp_path, monkeypatch):
+    """Two tasks dealt conditions in turn (the rows' task column), each with its control values and published
+    training set: the figures and the accuracy table are the first task's, campaign_summary.json every task's."""
+    import matplotlib.pyplot as plt
+    from cnr_benchmarks import campaign as script
+    from cnr_benchmarks import campaign_figures
+    from cnr_mission.core.task import RESULT_COLUMNS
+    monkeypatch.setattr(campaign_figures, 'fig_decision_map', lambda a: plt.subplots()[0])
+    tasks = ('corridor_long', 'corridor_round_trip')
+    values = str(tmp_path / 'control_values.yaml')
+    for task, ct in zip(tasks, (70.0, 21.0)):
+        write_control_values(values, ControlValues(task, ct, 0.3, 0.003, 0.00003, 8, '2026-11-29', 'test'))
+    out = tmp_path / 'campaign'
+    out.mkdir()
+    rows, learned, t0 = [], {t: [] for t in tasks}, 1.8e9
+
+    def add(cid, task, i, placement, learn, start):
+        ct = 70.0 if task == tasks[0] else 21.0
+        c_l, r_bw = (0.02, 50.0) if i % 2 else (0.15, 3.0)
+        v = 1.0 if placement == ONLOAD else (0.8 if i % 2 else 1.5)
+        label = OFFLOAD if i % 2 else ONLOAD
+        rows.append(dict(id=f'{cid}-{placement}-{start}', condition=cid, task=task, rtt_ms=1000 * c_l, rate_mbit=20,
+                         loss=0, force='' if learn else placement, decision=placement,
+                         reason='knn' if learn else 'forced', policy=label, confidence=1, votes_offload=0, c_l=c_l,
+                         r_bw=r_bw, profile_method='probe', placed=1, placing_time=0.2, redecisions=0, placement='',
+                         mission_status=COMPLETED, t_task=ct * v, b_task=0.003 * v, value=v, good=1, label=label,
+                         learned=int(learn), wall_start=start, wall_time=40))
+        if learn:
+            learned[task].append(_training_row(c_l, r_bw, label, task, start + 30 - 1.7e9))
+    for i in range(12):
+        add(f'c{i:04d}', tasks[i % 2], i // 2, OFFLOAD if (i // 2) % 2 else ONLOAD, True, t0 + 50 * i)
+    for j, i in enumerate(range(12, 16)):
+        for k, placement in enumerate((ONLOAD, OFFLOAD, ONLOAD, OFFLOAD)):
+            add(f'h{i:04d}', tasks[i % 2], j, placement, False, t0 + 700 + 200 * j + 50 * k)
+    with open(out / 'results.tsv', 'w', newline='') as f:
+        w = csv.DictWriter(f, RESULT_COLUMNS, delimiter='\t', lineterminator='\n')
+        w.writeheader()
+        w.writerows(rows)
+    for task, name in zip(tasks, ('training_set.tsv', 'training_set_corridor_round_trip.tsv')):
+        (out / name).write_text(HEADER + '\n' + ''.join(format_row(r) + '\n' for r in learned[task]))
+    assert script.main(['campaign', '--analyse-only', '--task', ','.join(tasks), '--out', str(out),
+                        '--control-values', values]) == 0
+    summary = json.loads((out / 'campaign_summary.json').read_text())
+    assert summary['tasks'] == list(tasks) and summary['training_conditions'] == 12
+    assert [summary['per_task'][t]['held_out'] for t in tasks] == [2, 2]
+    assert [summary['per_task'][t]['knn_rows'] for t in tasks] == [6, 6]
+    page = (out / 'README.md').read_text()
+    assert 'Tasks corridor_long, corridor_round_trip' in page
+    assert '6 training conditions run once each' in page              # the first task's paragraph
