@@ -327,9 +327,13 @@ def test_a_learning_plan_runs_training_conditions_once_and_held_out_ones_repeate
                                          0.5)
     assert [c.id for c in conditions] == ['c0001', 'c0002', 'h0003', 'h0004']
     runs = campaign.learning_plan_document('corridor_long', 'corridor', 6.0, conditions, 2)['runs']
-    assert [(r['id'], r['force'], r['learn'], r['explore'], r['reuse_profile']) for r in runs[:3]] == [
-        ('c0001-policy', '', True, True, False), ('c0002-policy', '', True, True, False),
-        ('h0003-onload-1', ONLOAD, False, False, False)]
+    assert [(r['id'], r['force'], r['learn'], r['explore'], r['reuse_profile']) for r in runs[:9]] == [
+        ('h0003-onload-1', ONLOAD, False, False, False), ('h0003-offload-1', OFFLOAD, False, False, True),
+        ('h0003-onload-2', ONLOAD, False, False, True), ('h0003-offload-2', OFFLOAD, False, False, True),
+        ('h0004-onload-1', ONLOAD, False, False, False)] + [
+        (f'h0004-{p}-{i}', p, False, False, True) for i, p in ((1, OFFLOAD), (2, ONLOAD), (2, OFFLOAD))] + [
+        ('c0001-policy', '', True, True, False)]
+    assert runs[-1]['id'] == 'c0002-policy'    # the held-out conditions first, then the training ones in order
     held = [r for r in runs if r['condition'] == 'h0003']
     assert [(r['force'], r['reuse_profile']) for r in held] == [(ONLOAD, False), (OFFLOAD, True), (ONLOAD, True),
                                                                 (OFFLOAD, True)]
@@ -346,8 +350,8 @@ def test_the_task_runner_reads_a_learning_plan(tmp_path):
     path = tmp_path / 'plan.yaml'
     path.write_text(yaml.safe_dump(campaign.learning_plan_document('corridor_long', 'corridor', 6.0, conditions, 2)))
     plan = load_plan(str(path))
-    assert [(r.force, r.learn, r.explore) for r in plan.runs[:2]] == [('', True, True), ('', True, True)]
-    assert len(plan.runs) == 6 and plan.runs[-1].reuse_profile and not plan.runs[2].reuse_profile
+    assert [(r.force, r.learn, r.explore) for r in plan.runs[-2:]] == [('', True, True), ('', True, True)]
+    assert len(plan.runs) == 6 and plan.runs[3].reuse_profile and not plan.runs[0].reuse_profile
 
 
 def test_a_learning_plan_holds_out_its_held_out_conditions_and_trains_on_every_other():
@@ -418,7 +422,7 @@ def test_a_plan_of_two_tasks_deals_the_conditions_in_turn_and_holds_out_each_tas
     path.write_text(yaml.safe_dump(campaign.learning_plan_document('corridor_long', 'corridor', 6.0, conditions, 2)))
     plan = load_plan(str(path))
     assert plan.tasks == ['corridor_long', 'corridor_round_trip']
-    assert [plan.task_of(r) for r in plan.runs[:2]] == ['corridor_long', 'corridor_round_trip']
+    assert [plan.task_of(r) for r in plan.runs if r.learn][:2] == ['corridor_long', 'corridor_round_trip']
     assert {plan.task_of(r) for r in plan.runs if r.condition == 'h0008'} == {'corridor_round_trip'}
 
 

@@ -118,11 +118,15 @@ def learning_plan_document(task: str, location: str, settle: float, conditions: 
     """The learned decision's campaign: a training condition is run once, placed by the robot's policy with
     exploration, and learned (what a robot in service does: one placement per task, the other one never seen); a
     held-out condition (:func:`held_out`) is run ``repeats`` times per placement, onload and offload alternating, on
-    the profile of its first run, never learned: the noise-aware oracle's repeats (core.decision_measures)."""
+    the profile of its first run, never learned: the noise-aware oracle's repeats (core.decision_measures). The
+    held-out conditions come first in the plan (they do not depend on what was learned), then the training ones in
+    their order."""
     if repeats < 1:
         raise ValueError(f'repeats must be >= 1, got {repeats}')
     runs = []
-    for c in conditions:
+    # the held-out conditions first: never learned, they measure the oracle whatever the robot has learned, so
+    # they stand for any learner (a campaign re-run with another one keeps them) and are made first
+    for c in sorted(conditions, key=lambda c: not held_out(c.id)):
         link = dict(delay=c.rtt_ms / 2.0, rate=c.rate, loss=c.loss)
         mine = dict(task=c.task) if c.task else {}          # (a condition's task: several tasks in one plan)
         if not held_out(c.id):
