@@ -69,11 +69,8 @@ def slowdown_config(out: str, slowdown: float, src: Optional[str] = None) -> str
     """A copy of ``src`` (default the workspace's config/) whose testbed.yaml caps the robot at 1/``slowdown`` CPU
     (the thesis's "different local CPU frequency"); rewritten on every run so it follows the configuration."""
     dst = copy_config(os.path.join(slowdown_dir(out, slowdown), 'config'), src)
-    path = os.path.join(dst, 'testbed.yaml')
-    with open(path) as f:
-        doc = yaml.safe_load(f)
-    doc['testbed']['robot_cpu'].update(enabled=True, slowdown=slowdown)
-    write_atomic(path, yaml.safe_dump(doc, sort_keys=False))
+    set_values(os.path.join(dst, 'testbed.yaml'),
+               {'testbed': {'robot_cpu': {'enabled': True, 'slowdown': slowdown}}}, 'slowdown_config')
     return dst
 
 
@@ -94,14 +91,28 @@ def task_config(scratch: str, slowdown: Optional[float] = None) -> str:
         path = os.path.join(dst, str(name))
         if not isinstance(values, dict) or not os.path.exists(path):
             raise ConfigError(overlay_path, str(name), 'expected a file of config/ with the values to set in it')
-        with open(path) as f:
-            doc = yaml.safe_load(f) or {}
-        missing = [k for k in values if k not in doc]
-        if missing:
-            raise ConfigError(overlay_path, f'{name}.{missing[0]}', f'no such key in config/{name}')
-        doc.update(values)
-        write_atomic(path, yaml.safe_dump(doc, sort_keys=False))
+        set_values(path, values, overlay_path, str(name))
     return dst
+
+
+def set_values(path: str, values: Dict, source: str, field: str = '') -> None:
+    """Set ``values`` (nested mappings: the keys inside them) in the YAML file ``path``, rewriting it; a key the file
+    does not have is a ConfigError naming ``source`` and the key's path under ``field``."""
+    from cnr_params import ConfigError
+    with open(path) as f:
+        doc = yaml.safe_load(f) or {}
+
+    def merge(target: Dict, new: Dict, at: str) -> None:
+        for key, value in new.items():
+            here = f'{at}.{key}' if at else str(key)
+            if key not in target:
+                raise ConfigError(source, here, f'no such key in {os.path.basename(path)}')
+            if isinstance(value, dict) and isinstance(target[key], dict):
+                merge(target[key], value, here)
+            else:
+                target[key] = value
+    merge(doc, values, field)
+    write_atomic(path, yaml.safe_dump(doc, sort_keys=False))
 
 
 def testbed_running(prog: str) -> bool:

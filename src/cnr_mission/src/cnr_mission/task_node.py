@@ -30,8 +30,8 @@ from move_base_msgs.msg import MoveBaseAction, MoveBaseGoal
 from sensor_msgs.msg import BatteryState
 
 import cnr_params
-from cnr_mission.core.task import (GAVE_UP, SUCCEEDED, TOO_LONG, RunSpec, append_result, battery_fields, charge_at,
-                                   evaluable, load_plan, load_task, mission_status, read_results, resolve_force)
+from cnr_mission.core.task import (GAVE_UP, SUCCEEDED, TOO_LONG, RunSpec, TaskSpec, append_result, battery_fields,
+                                   charge_at, evaluable, load_plan, load_task, mission_status, read_results, resolve_force)
 from cnr_msgs.msg import TaskDecision
 from cnr_msgs.srv import Decide, EvaluateTask, Teleport
 from cnr_navigation.goal_sequencer import wait_for_server
@@ -52,7 +52,6 @@ class TaskRunner:
         self.plan = load_plan(p.string('plan'))
         scenario = Section.from_file(p.string('scenario_file'))
         self.specs = {task: load_task(scenario, task) for task in self.plan.tasks}
-        self.spec = self.specs[self.plan.task_of(self.plan.runs[0])]     # the current run's task
         self.results = os.path.abspath(p.string('results'))
         testbed = p.string('testbed_config')
         self.testbed = None
@@ -123,10 +122,18 @@ class TaskRunner:
             self.say(f'goal {gh.comm_state_machine.action_goal.goal_id.id} not acknowledged after '
                      f'{time.monotonic() - sent:.1f} s: sent again')
 
-    def drive(self) -> List[str]:
-        """Each goal in turn; the outcomes (stops at the first that did not succeed)."""
+    def to_start(self, spec: TaskSpec) -> None:
+        """Put the robot at the task's start (the simulator's teleport)."""
+        sx, sy, sa = spec.start
+        self.teleport.wait_for_service(self.decide_timeout)
+        res = self.teleport(Pose2D(sx, sy, sa), False)
+        if not res.success:
+            raise RuntimeError(f'could not put the robot at the start ({sx}, {sy}): {res.message}')
+
+    def drive(self, spec: TaskSpec) -> List[str]:
+        """Each of the task's goals in turn; the outcomes (stops at the first that did not succeed)."""
         outcomes: List[str] = []
-        for x, y, yaw in self.spec.goals:
+        for x, y, yaw in spec.goals:
             goal = MoveBaseGoal()
             goal.target_pose.header.frame_id = 'map'
             goal.target_pose.header.stamp = rospy.Time.now()
@@ -148,7 +155,7 @@ class TaskRunner:
                     outcome = SUCCEEDED
                 elif state in FAILED_STATES:
                     outcome = GAVE_UP
-                elif rospy.Time.now().to_sec() - t0 > self.spec.goal_timeout:
+                elif rospy.Time.now().to_sec() - t0 > spec.goal_timeout:
                     outcome = TOO_LONG
                 elif time.monotonic() - self.last_status > self.server_timeout:
                     outcome = GAVE_UP       # the action server gone (e.g. move_base on a cut-off cloud, no failover)
@@ -165,7 +172,7 @@ class TaskRunner:
     def run(self, i: int, n: int, r: RunSpec) -> Dict:
         force = resolve_force(r.force, self.decided.get(r.condition))
         task = self.plan.task_of(r)
-        self.spec = self.specs[task]
+        spec = self.specs[task]
         row: Dict = dict(id=r.id, condition=r.condition, task=task, force=force, wall_start=round(time.time(), 3))
         w0 = time.monotonic()
         if r.link is not None:
@@ -185,11 +192,7 @@ class TaskRunner:
             while time.monotonic() < deadline and not rospy.is_shutdown():
                 time.sleep(0.1)
         self.link = r.link
-        sx, sy, sa = self.spec.start
-        self.teleport.wait_for_service(self.decide_timeout)
-        res = self.teleport(Pose2D(sx, sy, sa), False)
-        if not res.success:
-            raise RuntimeError(f'could not put the robot at the start ({sx}, {sy}): {res.message}')
+        self.to_start(spec)
         self.redecisions = []
         # s: the placement and the whole decision (profile + placement; wall), and the sim time the decision ended
         placing = t_decision = decided_at = 0.0
@@ -211,12 +214,12 @@ class TaskRunner:
         if not wait_for_server(self.client, self.decide_timeout):
             raise RuntimeError('move_base\'s action server is not there')
         t0 = rospy.Time.now().to_sec()
-        outcomes = self.drive()
+        outcomes = self.drive(spec)
         t1 = rospy.Time.now().to_sec()
         t_task = t1 - t0 + placing
         self._readings_after(t1)
         comp, base = list(self.battery), list(self.base_battery)
-        status = mission_status(outcomes, len(self.spec.goals))
+        status = mission_status(outcomes, len(spec.goals))
         batteries = battery_fields((charge_at(comp, t0), charge_at(comp, t1)),
                                    (charge_at(base, t0), charge_at(base, t1)), decided=r.decide,
                                    at_placing=charge_at(comp, decided_at - placing),
@@ -244,17 +247,14 @@ class TaskRunner:
     def warm_up(self, task: str, k: int) -> None:
         """Drive ``task`` once as placed, not decided and not recorded: the session's nodes are still starting
         under the robot's CPU cap when it begins (config/task_runner.yaml ``warmup_runs``)."""
-        self.spec = self.specs[task]
-        sx, sy, sa = self.spec.start
-        self.teleport.wait_for_service(self.decide_timeout)
-        if not self.teleport(Pose2D(sx, sy, sa), False).success:
-            raise RuntimeError(f'could not put the robot at the start ({sx}, {sy})')
+        spec = self.specs[task]
+        self.to_start(spec)
         if not wait_for_server(self.client, self.decide_timeout):
             raise RuntimeError('move_base\'s action server is not there')
         t0 = rospy.Time.now().to_sec()
-        outcomes = self.drive()
+        outcomes = self.drive(spec)
         self.say(f'warm-up {k}/{self.warmup_runs} ({task}, not recorded): '
-                 f'{mission_status(outcomes, len(self.spec.goals))} in {rospy.Time.now().to_sec() - t0:.1f} s')
+                 f'{mission_status(outcomes, len(spec.goals))} in {rospy.Time.now().to_sec() - t0:.1f} s')
 
     def spin(self) -> int:
         rows, warnings = read_results(self.results)
